@@ -1,0 +1,130 @@
+//! Ray traversal backends behind one trait.
+//!
+//! A backend answers one question: *which primitive does this ray hit first*
+//! (or *does it hit anything*). It knows nothing of normals, materials or
+//! lights; `scene::Interaction` describes the hit from the record returned here.
+
+pub mod brute;
+pub mod bvh;
+pub mod embree;
+pub mod prims;
+
+use crate::error::Result;
+use crate::ray::Ray;
+use crate::scene::Shape;
+use std::fmt;
+use std::time::Instant;
+
+/// What a backend knows about a hit. Geometry ids number the scene's shapes in
+/// order (`Scene::shapes`); the primitive id is the triangle index inside its
+/// mesh (0 for a sphere). `u`, `v` are the barycentric weights of the
+/// triangle's second and third vertices (0 for spheres).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub u: f32,
+    pub v: f32,
+    pub geom_id: u32,
+    pub prim_id: u32,
+}
+
+impl Hit {
+    /// The order used to break exact ties in `t`: lower (geometry, primitive) wins.
+    #[inline]
+    pub fn key(&self) -> u64 {
+        ((self.geom_id as u64) << 32) | self.prim_id as u64
+    }
+}
+
+/// Closest-hit and any-hit ray queries over a fixed set of shapes.
+///
+/// The contract, identical for every backend:
+/// * **Range**: a hit counts only if `ray.tmin < t <= ray.tmax` (half-open:
+///   a surface exactly at `tmin` is not hit, one exactly at `tmax` is).
+///   `t` is in units of `ray.dir`, which need not be normalised.
+/// * **Two-sided**: triangles are hit from both sides; spheres are hit from
+///   outside (near root) and from inside (far root).
+/// * **Watertight**: a ray through a shared edge or vertex of a closed mesh
+///   hits at least one of the triangles sharing it.
+/// * **Degenerate primitives** (zero-area triangles, zero-radius spheres) are
+///   never hit, and a ray lying in a triangle's plane misses it.
+/// * **Invalid rays** (see `Ray::is_valid`: NaN/Inf components, zero
+///   direction, bad range) hit nothing and are never occluded.
+/// * **Ties**: if two primitives are hit at exactly the same `t`, the native
+///   and brute backends return the lower `(geom_id, prim_id)`; Embree may
+///   return either (the cross-check counts such ties).
+/// * **Thread safety**: queries take `&self` and may run from any number of
+///   threads at once.
+pub trait Traversal: Send + Sync {
+    /// Short backend name as accepted by `--backend`.
+    fn name(&self) -> &'static str;
+
+    /// Human-readable details for the summary line (builder, version, ISA).
+    fn describe(&self) -> String {
+        self.name().to_string()
+    }
+
+    /// Bytes of acceleration structure and primitive data owned by the backend.
+    fn memory_bytes(&self) -> usize;
+
+    /// The closest hit in range, or `None`.
+    fn intersect(&self, ray: &Ray) -> Option<Hit>;
+
+    /// Whether anything is hit in range. May stop at the first hit found.
+    fn occluded(&self, ray: &Ray) -> bool;
+
+    /// `hits[i] = intersect(&rays[i])`. Backends override this where batching pays.
+    fn intersect_batch(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), hits.len());
+        for (r, h) in rays.iter().zip(hits.iter_mut()) {
+            *h = self.intersect(r);
+        }
+    }
+
+    /// `out[i] = occluded(&rays[i])`.
+    fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len());
+        for (r, o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.occluded(r);
+        }
+    }
+}
+
+/// The backends selectable with `--backend`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendKind {
+    /// Our binned-SAH BVH.
+    Native,
+    /// Intel Embree through the C shim in `native/`.
+    Embree,
+    /// No acceleration: every ray tests every primitive (the test oracle).
+    Brute,
+}
+
+impl fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            BackendKind::Native => "native",
+            BackendKind::Embree => "embree",
+            BackendKind::Brute => "brute",
+        })
+    }
+}
+
+/// A built backend and the wall time its build took.
+pub struct Built {
+    pub accel: Box<dyn Traversal>,
+    pub build_seconds: f64,
+}
+
+/// Build the chosen backend over `shapes`. `threads` bounds any thread pool the
+/// backend owns (Embree's TBB); 0 means all cores.
+pub fn build(kind: BackendKind, shapes: &[Shape], threads: usize) -> Result<Built> {
+    let start = Instant::now();
+    let accel: Box<dyn Traversal> = match kind {
+        BackendKind::Native => Box::new(bvh::Bvh::build(shapes)),
+        BackendKind::Brute => Box::new(brute::BruteForce::new(shapes)),
+        BackendKind::Embree => Box::new(embree::EmbreeBackend::build(shapes, threads)?),
+    };
+    Ok(Built { accel, build_seconds: start.elapsed().as_secs_f64() })
+}

@@ -1,0 +1,319 @@
+//! `pathtracer bench`: BVH build time, memory and ray throughput per backend,
+//! and CS184's with/without-BVH render timing, printed as a Markdown table.
+//!
+//! The ray sets are public so the cross-check tests trace exactly what the
+//! benchmark times.
+
+use crate::accel::{self, BackendKind, Hit, Traversal};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::ray::Ray;
+use crate::render::{self, normals::NormalShading, RenderSettings};
+use crate::rng::Rng;
+use crate::scene::{Scene, Shape, TriangleMesh};
+use clap::Args;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Scene files or names (cow, maxplanck, CBbunny, beetle, ... found in
+    /// scenes/ or ../shared/scenes/cs184), or sphere:N for a procedural
+    /// lat-long sphere of about N triangles. Default: cow maxplanck CBbunny beetle.
+    pub scenes: Vec<String>,
+    /// Backends to time
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BackendKind::Native, BackendKind::Brute])]
+    pub backends: Vec<BackendKind>,
+    /// Rays per throughput measurement (brute uses a 1/32 subset)
+    #[arg(long, default_value_t = 1 << 20)]
+    pub rays: usize,
+    /// Skip the 480x360 render timing with and without the BVH
+    #[arg(long)]
+    pub no_render: bool,
+    /// Also write the throughput rows as CSV
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Also write the printed tables as Markdown
+    #[arg(long, value_name = "FILE")]
+    pub markdown: Option<PathBuf>,
+}
+
+pub const DEFAULT_SCENES: [&str; 4] = ["cow", "maxplanck", "CBbunny", "beetle"];
+
+/// Folders searched for scene names, in order.
+pub fn scene_dirs() -> Vec<PathBuf> {
+    let mut dirs = Vec::new();
+    if let Some(d) = std::env::var_os("PATHTRACER_SCENES") {
+        dirs.push(PathBuf::from(d));
+    }
+    for base in [PathBuf::from("."), PathBuf::from(env!("CARGO_MANIFEST_DIR"))] {
+        dirs.push(base.join("scenes"));
+        for sub in ["sky", "meshedit", "simple"] {
+            dirs.push(base.join("../shared/scenes/cs184").join(sub));
+        }
+    }
+    dirs
+}
+
+/// A path as given, or `NAME.dae` found in `scene_dirs()`.
+pub fn find_scene(name: &str) -> Result<PathBuf> {
+    let p = Path::new(name);
+    if p.exists() {
+        return Ok(p.to_path_buf());
+    }
+    let file = if name.ends_with(".dae") { name.to_string() } else { format!("{name}.dae") };
+    scene_dirs()
+        .into_iter()
+        .map(|d| d.join(&file))
+        .find(|p| p.exists())
+        .ok_or_else(|| Error::new(format!("{name}: scene not found (looked in ./scenes, ../shared/scenes/cs184 and $PATHTRACER_SCENES)")))
+}
+
+/// A closed lat-long unit sphere with `2 * segments * rings` triangles
+/// (the pole triangles are degenerate, as in Embree's measurements).
+pub fn lat_long_sphere(segments: u32, rings: u32) -> TriangleMesh {
+    let mut m = TriangleMesh::default();
+    for j in 0..=rings {
+        let th = std::f32::consts::PI * j as f32 / rings as f32;
+        for i in 0..=segments {
+            let ph = 2.0 * std::f32::consts::PI * (i % segments) as f32 / segments as f32;
+            m.positions.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()));
+        }
+    }
+    let row = segments + 1;
+    for j in 0..rings {
+        for i in 0..segments {
+            let (a, b, c, d) = (j * row + i, j * row + i + 1, (j + 1) * row + i, (j + 1) * row + i + 1);
+            m.triangles.push([a, c, b]);
+            m.triangles.push([b, c, d]);
+        }
+    }
+    m.compute_normals();
+    m
+}
+
+/// A scene of one procedural sphere of about `n` triangles, with a camera
+/// looking at it from +z.
+pub fn procedural_scene(n: usize) -> Scene {
+    let rings = ((n as f64 / 4.0).sqrt().max(2.0)) as u32;
+    let segments = 2 * rings;
+    let mut scene = crate::scene::builtin::load().expect("built-in scene parses");
+    scene.name = format!("sphere{}k", (2 * segments * rings) / 1000);
+    scene.source = "<procedural>".into();
+    scene.shapes = vec![Shape::Mesh(lat_long_sphere(segments, rings))];
+    scene.objects.truncate(1);
+    scene.objects[0].material = 0;
+    scene.lights.clear();
+    scene.camera.c_dir = Vec3::Z;
+    scene
+}
+
+pub fn load_bench_scene(name: &str) -> Result<Scene> {
+    if let Some(n) = name.strip_prefix("sphere:") {
+        let n: f64 = n.trim_end_matches(['m', 'M']).parse().map_err(|_| Error::new(format!("{name}: expected sphere:N")))?;
+        let n = if name.ends_with(['m', 'M']) { n * 1e6 } else { n };
+        if !(n >= 8.0 && n <= 2.0e8) {
+            crate::bail!("{name}: triangle count must be between 8 and 2e8");
+        }
+        return Ok(procedural_scene(n as usize));
+    }
+    crate::scene::collada::load_file(&find_scene(name)?)
+}
+
+/// Camera rays through the pixel centres of a `w x h` frame, scanline order.
+pub fn camera_rays(camera: &Camera, w: u32, h: u32) -> Vec<Ray> {
+    let mut rays = Vec::with_capacity((w * h) as usize);
+    for y in 0..h {
+        for x in 0..w {
+            rays.push(camera.generate_ray((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32));
+        }
+    }
+    rays
+}
+
+/// Incoherent rays: origins uniform in the scene bounds grown by 10 % on
+/// every side (so some start outside), directions uniform on the sphere.
+pub fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
+    let b = scene.bounds();
+    let grow = b.extent() * 0.1 + Vec3::splat(1e-3);
+    let (lo, size) = (b.min - grow, b.extent() + 2.0 * grow);
+    let mut rng = Rng::new(seed, 0xB0B);
+    (0..n)
+        .map(|_| {
+            let o = lo + size * Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+            let z = 1.0 - 2.0 * rng.uniform();
+            let phi = 2.0 * std::f32::consts::PI * rng.uniform();
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            Ray::new(o, Vec3::new(r * phi.cos(), r * phi.sin(), z))
+        })
+        .collect()
+}
+
+/// Shadow rays from the first hits of `primary` towards a point above the
+/// scene's bounding box, stopping just short of it.
+pub fn shadow_rays(scene: &Scene, accel: &dyn Traversal, primary: &[Ray]) -> Vec<Ray> {
+    let b = scene.bounds();
+    let light = Vec3::new(b.center().x, b.max.y - 0.02 * b.extent().y, b.center().z);
+    primary
+        .par_iter()
+        .filter_map(|r| accel.intersect(r).map(|h| (r, h)))
+        .map(|(r, h): (&Ray, Hit)| {
+            let p = r.at(h.t);
+            let d = light - p;
+            // Start a hair off the surface so the ray does not re-hit it.
+            Ray::with_range(p, d, 1e-4, 1.0 - 1e-4)
+        })
+        .collect()
+}
+
+/// Best-of-`reps` Mrays/s of closest-hit (or occlusion) queries on `threads` threads.
+fn throughput(accel: &dyn Traversal, rays: &[Ray], occlusion: bool, threads: usize, reps: usize) -> f64 {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
+    let mut best = f64::INFINITY;
+    for _ in 0..reps {
+        let start = Instant::now();
+        pool.install(|| {
+            rays.par_chunks(4096).for_each(|chunk| {
+                if occlusion {
+                    let mut out = vec![false; chunk.len()];
+                    accel.occluded_batch(chunk, &mut out);
+                    std::hint::black_box(&out);
+                } else {
+                    let mut out = vec![None; chunk.len()];
+                    accel.intersect_batch(chunk, &mut out);
+                    std::hint::black_box(&out);
+                }
+            })
+        });
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    rays.len() as f64 / best / 1e6
+}
+
+/// One row of the CSV: `scene, rays, threads, backend, mrays_per_s`.
+pub struct Sample {
+    pub scene: String,
+    pub rays: &'static str,
+    pub threads: usize,
+    pub backend: BackendKind,
+    pub mrays_per_s: f64,
+}
+
+/// The seed write-up's render timings (normal shading), where it gives them.
+fn seed_timing(scene: &str) -> (&'static str, &'static str) {
+    match scene {
+        "cow" => ("0.03", "5"),
+        "maxplanck" => ("0.3", "47"),
+        _ => ("–", "–"),
+    }
+}
+
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let all = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let names: Vec<String> = if args.scenes.is_empty() { DEFAULT_SCENES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
+    let mut thread_counts = vec![1];
+    if all > 1 {
+        thread_counts.push(all);
+    }
+    let mut md = String::new();
+    let mut samples: Vec<Sample> = Vec::new();
+    let _ = writeln!(md, "Throughput in Mrays/s (best of 3; brute on a 1/32 subset). Threads: 1 and {all}.\n");
+    let _ = writeln!(md, "| scene | prims | backend | build ms | MiB | B/prim | camera 1T | camera {all}T | shadow 1T | shadow {all}T | random 1T | random {all}T |");
+    let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let mut render_rows = String::new();
+    for name in &names {
+        let scene = load_bench_scene(name)?;
+        let prims = scene.primitive_count();
+        let camera = Camera::from_scene(&scene);
+        let cam_all = camera_rays(&camera, 1024, 768);
+        let cam: Vec<Ray> = cam_all.iter().cycle().take(args.rays).copied().collect();
+        let rnd = random_rays(&scene, args.rays, 1);
+        let mut shadow: Option<Vec<Ray>> = None;
+        for &kind in &args.backends {
+            let built = match accel::build(kind, &scene.shapes, all) {
+                Ok(b) => b,
+                Err(e) => {
+                    eprintln!("bench: {}: {e}", scene.name);
+                    continue;
+                }
+            };
+            let a = built.accel.as_ref();
+            if shadow.is_none() {
+                shadow = Some(shadow_rays(&scene, a, &cam));
+            }
+            let sh = shadow.as_ref().unwrap();
+            let (sub, reps) = if kind == BackendKind::Brute { (32, 1) } else { (1, 3) };
+            let take = |v: &[Ray]| -> Vec<Ray> { v.iter().step_by(sub).copied().collect() };
+            let (cam_s, sh_s, rnd_s) = (take(&cam), take(sh), take(&rnd));
+            let mut cells = Vec::new();
+            for (label, rays, occ) in [("camera", &cam_s, false), ("shadow", &sh_s, true), ("random", &rnd_s, false)] {
+                for &t in &thread_counts {
+                    let m = throughput(a, rays, occ, t, reps);
+                    samples.push(Sample { scene: scene.name.clone(), rays: label, threads: t, backend: kind, mrays_per_s: m });
+                    cells.push(m);
+                }
+            }
+            if thread_counts.len() == 1 {
+                // Keep the table's columns: repeat the single-thread figure.
+                cells = cells.iter().flat_map(|&c| [c, c]).collect();
+            }
+            let mem = a.memory_bytes() as f64;
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.1} | {:.1} | {:.1} | {} |",
+                scene.name,
+                prims,
+                kind,
+                built.build_seconds * 1e3,
+                mem / (1024.0 * 1024.0),
+                mem / prims.max(1) as f64,
+                cells.iter().map(|c| format!("{c:.2}")).collect::<Vec<_>>().join(" | ")
+            );
+        }
+        if !args.no_render {
+            let mut times = Vec::new();
+            for kind in [BackendKind::Native, BackendKind::Brute] {
+                let built = accel::build(kind, &scene.shapes, all)?;
+                let mut cam = camera.clone();
+                cam.set_screen_size(480, 360);
+                let integ = NormalShading { scene: &scene, accel: built.accel.as_ref() };
+                let settings = RenderSettings { width: 480, height: 360, spp: 1, seed: 0, region: None, adaptive: None, progress: false };
+                let out = render::render(&cam, &integ, &settings);
+                times.push(out.seconds);
+            }
+            let (seed_bvh, seed_brute) = seed_timing(&scene.name);
+            let _ = writeln!(
+                render_rows,
+                "| {} | {} | {:.3} | {:.2} | {:.0}x | {} | {} |",
+                scene.name,
+                prims,
+                times[0],
+                times[1],
+                times[1] / times[0],
+                seed_bvh,
+                seed_brute
+            );
+        }
+    }
+    if !render_rows.is_empty() {
+        let _ = writeln!(md, "\nNormal-shading render, 480x360, 1 spp, {all} threads (seconds; seed: CS184 write-up, settings unknown):\n");
+        let _ = writeln!(md, "| scene | prims | with BVH | without BVH | speed-up | seed with BVH | seed without |");
+        let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|---:|");
+        md.push_str(&render_rows);
+    }
+    print!("{md}");
+    if let Some(p) = &args.markdown {
+        crate::cli::write_text_atomically(p, &md)?;
+    }
+    if let Some(p) = &args.csv {
+        let mut csv = String::from("scene,rays,threads,backend,mrays_per_s\n");
+        for s in &samples {
+            let _ = writeln!(csv, "{},{},{},{},{:.4}", s.scene, s.rays, s.threads, s.backend, s.mrays_per_s);
+        }
+        crate::cli::write_text_atomically(p, &csv)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,272 @@
+//! The command line: CS184's flags plus ours, one-line errors, the summary line.
+
+use crate::accel::{self, BackendKind};
+use crate::camera::{Camera, DEFAULT_HEIGHT, DEFAULT_WIDTH};
+use crate::error::{Error, Result};
+use crate::image_io;
+use crate::render::{self, normals::NormalShading, Adaptive, Integrator, Region, RenderSettings};
+use crate::scene::{builtin, collada, Scene};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "pathtracer",
+    version,
+    about = "Physically based path tracer for CS184 .dae scenes (native BVH, Embree or brute-force traversal)",
+    args_conflicts_with_subcommands = true
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    #[command(flatten)]
+    pub render: RenderArgs,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Time BVH builds and ray throughput per backend, and print a table.
+    Bench(crate::bench::BenchArgs),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum IntegratorKind {
+    /// Shading normal as colour, n*0.5+0.5 (CS184's normal_shading).
+    Normals,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// COLLADA scene (.dae). Without one, the built-in CBspheres_lambertian is rendered.
+    pub scene: Option<PathBuf>,
+    /// Render threads [default: all cores]
+    #[arg(short = 't', value_name = "N")]
+    pub threads: Option<usize>,
+    /// Camera rays per pixel (the maximum with -a) [default: 1]
+    #[arg(short = 's', value_name = "N")]
+    pub spp: Option<u32>,
+    /// Samples per area light [default: 1]
+    #[arg(short = 'l', value_name = "N")]
+    pub light_samples: Option<u32>,
+    /// Maximum ray depth [default: 1]
+    #[arg(short = 'm', value_name = "N")]
+    pub max_depth: Option<u32>,
+    /// 1: accumulate bounces 0..m; 0: output only bounce m [default: 1]
+    #[arg(short = 'o', value_name = "0|1")]
+    pub accumulate: Option<i64>,
+    /// Uniform hemisphere sampling for direct light instead of light sampling
+    #[arg(short = 'H')]
+    pub hemisphere: bool,
+    /// Adaptive sampling: check every BATCH samples, stop at relative tolerance TOL
+    #[arg(short = 'a', num_args = 2, value_names = ["BATCH", "TOL"], allow_negative_numbers = true)]
+    pub adaptive: Option<Vec<String>>,
+    /// Frame size in pixels [default: 800 600]; keeps CS184's pixel focal length
+    #[arg(short = 'r', num_args = 2, value_names = ["W", "H"], allow_negative_numbers = true)]
+    pub resolution: Option<Vec<String>>,
+    /// Output PNG (also writes <FILE minus extension>_rate.png) [default: ./<scene>.png]
+    #[arg(short = 'f', value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Load a CS184 camera settings file
+    #[arg(short = 'c', value_name = "FILE")]
+    pub camera: Option<PathBuf>,
+    /// Render only the cell at X,Y (from the bottom-left) of size DX x DY
+    #[arg(short = 'p', num_args = 4, value_names = ["X", "Y", "DX", "DY"], allow_negative_numbers = true)]
+    pub cell: Option<Vec<String>>,
+    /// Ray traversal backend
+    #[arg(long, value_enum, default_value_t = BackendKind::Native)]
+    pub backend: BackendKind,
+    /// What to compute per camera ray
+    #[arg(long, value_enum, default_value_t = IntegratorKind::Normals)]
+    pub integrator: IntegratorKind,
+    /// Seed of the per-pixel random streams
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Also write the linear radiance as OpenEXR
+    #[arg(long, value_name = "FILE")]
+    pub exr: Option<PathBuf>,
+    /// Also write the per-pixel variance of the mean as OpenEXR
+    #[arg(long, value_name = "FILE")]
+    pub variance_exr: Option<PathBuf>,
+    /// Write the camera settings (CS184's six-line format) used for this render
+    #[arg(long, value_name = "FILE")]
+    pub write_camera: Option<PathBuf>,
+}
+
+/// Entry point for the binary: one line on error, non-zero exit, no panic.
+pub fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
+            eprintln!("pathtracer: error: {first} (see --help)");
+            return ExitCode::from(2);
+        }
+    };
+    let result = match cli.command {
+        Some(Command::Bench(b)) => crate::bench::run(&b),
+        None => run_render(&cli.render),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("pathtracer: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn parse_pair<T: std::str::FromStr>(v: &[String], flag: &str) -> Result<Vec<T>> {
+    v.iter()
+        .map(|s| s.parse::<T>().map_err(|_| Error::new(format!("{flag}: '{s}' is not a valid value"))))
+        .collect()
+}
+
+/// Configure the global rayon pool (`-t`; 0 or absent means all cores).
+pub fn init_threads(threads: Option<usize>) -> Result<usize> {
+    let n = match threads {
+        None | Some(0) => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+        Some(n) if n > 4096 => crate::bail!("-t {n}: too many threads"),
+        Some(n) => n,
+    };
+    // A second call (tests) finds the pool already built; that is fine.
+    let _ = rayon::ThreadPoolBuilder::new().num_threads(n).build_global();
+    Ok(n)
+}
+
+pub fn load_scene(path: Option<&Path>) -> Result<Scene> {
+    match path {
+        None => builtin::load(),
+        Some(p) => collada::load_file(p),
+    }
+}
+
+fn run_render(a: &RenderArgs) -> Result<()> {
+    // Validate every flag before doing any work.
+    let (width, height) = match &a.resolution {
+        None => (DEFAULT_WIDTH, DEFAULT_HEIGHT),
+        Some(v) => {
+            let r: Vec<u32> = parse_pair(v, "-r")?;
+            if r[0] == 0 || r[1] == 0 || r[0] > 16384 || r[1] > 16384 {
+                crate::bail!("-r {} {}: width and height must be between 1 and 16384", r[0], r[1]);
+            }
+            (r[0], r[1])
+        }
+    };
+    let spp = a.spp.unwrap_or(1);
+    if spp == 0 || spp > 1 << 20 {
+        crate::bail!("-s {spp}: samples per pixel must be between 1 and 1048576");
+    }
+    let adaptive = match &a.adaptive {
+        None => None,
+        Some(v) => {
+            let batch: u32 = v[0].parse().map_err(|_| Error::new(format!("-a: batch '{}' is not a positive integer", v[0])))?;
+            let tol: f32 = v[1].parse().map_err(|_| Error::new(format!("-a: tolerance '{}' is not a number", v[1])))?;
+            if batch < 2 {
+                crate::bail!("-a {batch} {tol}: the batch must be at least 2 samples");
+            }
+            if !(tol > 0.0 && tol.is_finite()) {
+                crate::bail!("-a {batch} {tol}: the tolerance must be a positive number");
+            }
+            Some(Adaptive { batch, tolerance: tol })
+        }
+    };
+    let region = match &a.cell {
+        None => None,
+        Some(v) => {
+            let c: Vec<u32> = parse_pair(v, "-p")?;
+            let r = Region { x: c[0], y: c[1], w: c[2], h: c[3] };
+            if r.w == 0 || r.h == 0 || r.x as u64 + r.w as u64 > width as u64 || r.y as u64 + r.h as u64 > height as u64 {
+                crate::bail!("-p {} {} {} {}: the cell must lie inside the {width}x{height} frame", r.x, r.y, r.w, r.h);
+            }
+            Some(r)
+        }
+    };
+    if a.integrator == IntegratorKind::Normals {
+        let lighting_flags = [
+            (a.light_samples.is_some(), "-l"),
+            (a.max_depth.is_some(), "-m"),
+            (a.accumulate.is_some(), "-o"),
+            (a.hemisphere, "-H"),
+        ];
+        if let Some((_, flag)) = lighting_flags.iter().find(|(used, _)| *used) {
+            crate::bail!("{flag} applies to light transport, which is not implemented yet; only --integrator normals exists");
+        }
+    }
+    let threads = init_threads(a.threads)?;
+
+    let scene = load_scene(a.scene.as_deref())?;
+    let mut camera = Camera::from_scene(&scene);
+    if a.resolution.is_some() {
+        camera.set_screen_size(width, height);
+    }
+    if let Some(c) = &a.camera {
+        camera.load_settings(c)?;
+    }
+    let output = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
+    if let Some(p) = &a.write_camera {
+        write_text_atomically(p, &camera.to_settings())?;
+    }
+
+    let built = accel::build(a.backend, &scene.shapes, threads)?;
+    let integrator: Box<dyn Integrator> = match a.integrator {
+        IntegratorKind::Normals => Box::new(NormalShading { scene: &scene, accel: built.accel.as_ref() }),
+    };
+    let settings = RenderSettings { width, height, spp, seed: a.seed, region, adaptive, progress: render::progress_wanted() };
+    let start = Instant::now();
+    let out = render::render(&camera, integrator.as_ref(), &settings);
+    let render_s = start.elapsed().as_secs_f64();
+
+    image_io::write_png(&output, &out.image)?;
+    let mut written = vec![output.display().to_string()];
+    if a.output.is_some() {
+        // CS184 writes the rate image beside every -f output.
+        let rate = rate_path(&output);
+        image_io::write_rate_png(&rate, out.image.width, out.image.height, &out.samples, spp)?;
+        written.push(rate.display().to_string());
+    }
+    if let Some(p) = &a.exr {
+        image_io::write_exr(p, &out.image)?;
+        written.push(p.display().to_string());
+    }
+    if let Some(p) = &a.variance_exr {
+        image_io::write_exr(p, &out.variance)?;
+        written.push(p.display().to_string());
+    }
+    println!(
+        "{} | {} primitives | backend {} | BVH build {:.3} s | render {:.3} s | {} rays | {:.2} Mrays/s | {} threads | wrote {}",
+        scene.name,
+        scene.primitive_count(),
+        built.accel.describe(),
+        built.build_seconds,
+        render_s,
+        out.rays,
+        out.rays as f64 / render_s.max(1e-9) / 1e6,
+        threads,
+        written.join(", ")
+    );
+    Ok(())
+}
+
+/// CS184's `<FILE minus its last 4 chars>_rate.png`, done on the extension.
+pub fn rate_path(output: &Path) -> PathBuf {
+    let stem = output.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    output.with_file_name(format!("{stem}_rate.png"))
+}
+
+pub fn write_text_atomically(path: &Path, text: &str) -> Result<()> {
+    let tmp = path.with_file_name(format!(".{}.partial-{}", path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(), std::process::id()));
+    std::fs::write(&tmp, text)
+        .and_then(|_| std::fs::rename(&tmp, path))
+        .map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            Error::new(format!("{}: cannot write: {e}", path.display()))
+        })
+}

@@ -1,0 +1,146 @@
+//! Watertight ray/triangle intersection (Woop, Benthin, Wald, JCGT 2013).
+//!
+//! The ray is sheared so that it points down +z from the origin; the triangle
+//! is then tested in 2D with edge functions. Adjacent triangles evaluate the
+//! same edge function with the same operands, so a ray through a shared edge
+//! or vertex hits at least one of them: no cracks. When an edge function is
+//! exactly zero the test is repeated in f64 so the sign is decided exactly.
+
+use glam::Vec3;
+
+/// Per-ray shear constants, computed once per ray and reused for every triangle.
+#[derive(Clone, Copy, Debug)]
+pub struct RayTransform {
+    pub origin: Vec3,
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    sx: f32,
+    sy: f32,
+    sz: f32,
+}
+
+impl RayTransform {
+    /// `dir` must be finite and non-zero (see `Ray::is_valid`).
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        let a = dir.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        // Keep the winding of the sheared triangle independent of the sign of dir[kz].
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let dz = dir[kz];
+        RayTransform { origin, kx, ky, kz, sx: dir[kx] / dz, sy: dir[ky] / dz, sz: 1.0 / dz }
+    }
+}
+
+/// Returns `(t, u, v)` for a hit with `tmin < t <= tmax`, where `u` and `v`
+/// are the barycentric weights of `p1` and `p2` (so the hit point is
+/// `(1-u-v) p0 + u p1 + v p2`). Triangles are two-sided. A degenerate
+/// (zero-area, as seen along the ray) triangle is never hit, and a ray lying
+/// in the triangle's plane misses it.
+#[inline]
+pub fn intersect_triangle(
+    rt: &RayTransform,
+    p0: Vec3,
+    p1: Vec3,
+    p2: Vec3,
+    tmin: f32,
+    tmax: f32,
+) -> Option<(f32, f32, f32)> {
+    let (kx, ky, kz) = (rt.kx, rt.ky, rt.kz);
+    let a = p0 - rt.origin;
+    let b = p1 - rt.origin;
+    let c = p2 - rt.origin;
+    let ax = a[kx] - rt.sx * a[kz];
+    let ay = a[ky] - rt.sy * a[kz];
+    let bx = b[kx] - rt.sx * b[kz];
+    let by = b[ky] - rt.sy * b[kz];
+    let cx = c[kx] - rt.sx * c[kz];
+    let cy = c[ky] - rt.sy * c[kz];
+
+    let mut e0 = cx * by - cy * bx; // weight of p0
+    let mut e1 = ax * cy - ay * cx; // weight of p1
+    let mut e2 = bx * ay - by * ax; // weight of p2
+    if e0 == 0.0 || e1 == 0.0 || e2 == 0.0 {
+        // Exact sign on the edge: redo the 2x2 determinants in double precision.
+        let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+        e0 = (cx * by - cy * bx) as f32;
+        e1 = (ax * cy - ay * cx) as f32;
+        e2 = (bx * ay - by * ax) as f32;
+    }
+    if (e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0) {
+        return None;
+    }
+    let det = e0 + e1 + e2;
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let az = rt.sz * a[kz];
+    let bz = rt.sz * b[kz];
+    let cz = rt.sz * c[kz];
+    let t_scaled = e0 * az + e1 * bz + e2 * cz;
+    // Hits behind the origin (t <= 0) are rejected before the division; valid
+    // rays have tmin >= 0, so this never rejects a hit the exact test keeps.
+    if (det > 0.0 && t_scaled <= 0.0) || (det < 0.0 && t_scaled >= 0.0) {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let t = t_scaled * inv;
+    if !(t > tmin && t <= tmax) {
+        return None;
+    }
+    Some((t, e1 * inv, e2 * inv))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hit(o: Vec3, d: Vec3, p: [Vec3; 3]) -> Option<(f32, f32, f32)> {
+        intersect_triangle(&RayTransform::new(o, d), p[0], p[1], p[2], 0.0, f32::INFINITY)
+    }
+
+    const TRI: [Vec3; 3] = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+
+    #[test]
+    fn barycentrics_weight_p1_and_p2() {
+        let (t, u, v) = hit(Vec3::new(0.25, 0.5, 2.0), Vec3::new(0.0, 0.0, -1.0), TRI).unwrap();
+        assert_eq!(t, 2.0);
+        assert!((u - 0.25).abs() < 1e-7 && (v - 0.5).abs() < 1e-7, "{u} {v}");
+    }
+
+    #[test]
+    fn two_sided() {
+        assert!(hit(Vec3::new(0.2, 0.2, -1.0), Vec3::Z, TRI).is_some());
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, TRI).is_some());
+    }
+
+    #[test]
+    fn range_is_half_open() {
+        let rt = RayTransform::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z);
+        // t == tmax is a hit, t == tmin is not.
+        assert!(intersect_triangle(&rt, TRI[0], TRI[1], TRI[2], 0.0, 1.0).is_some());
+        assert!(intersect_triangle(&rt, TRI[0], TRI[1], TRI[2], 1.0, 2.0).is_none());
+        assert!(intersect_triangle(&rt, TRI[0], TRI[1], TRI[2], 0.0, 0.999).is_none());
+    }
+
+    #[test]
+    fn degenerate_and_in_plane_miss() {
+        let line = [Vec3::ZERO, Vec3::X, Vec3::X * 2.0];
+        assert!(hit(Vec3::new(1.0, 0.0, 1.0), -Vec3::Z, line).is_none());
+        let point = [Vec3::ONE; 3];
+        assert!(hit(Vec3::new(1.0, 1.0, 2.0), -Vec3::Z, point).is_none());
+        // A ray travelling inside the triangle's plane.
+        assert!(hit(Vec3::new(-1.0, 0.2, 0.0), Vec3::X, TRI).is_none());
+    }
+}

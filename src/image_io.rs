@@ -1,0 +1,141 @@
+//! Writing images: CS184's PNG tone step, its sample-rate image, and linear
+//! OpenEXR. Every file is written to a temporary name and renamed into place,
+//! so a failed or interrupted write never leaves a partial output file.
+
+use crate::error::{Error, Result};
+use glam::Vec3;
+use std::path::{Path, PathBuf};
+
+/// A linear RGB image, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rgb {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Vec3>,
+}
+
+impl Rgb {
+    pub fn new(width: u32, height: u32) -> Self {
+        Rgb { width, height, pixels: vec![Vec3::ZERO; (width * height) as usize] }
+    }
+
+    pub fn get(&self, x: u32, y: u32) -> Vec3 {
+        self.pixels[(y * self.width + x) as usize]
+    }
+}
+
+/// CS184's `toColor`: exposure sqrt(2), gamma 1/2.2, clamp, truncate to 8 bits.
+pub fn tone_byte(v: f32) -> u8 {
+    let c = (v * std::f32::consts::SQRT_2).powf(1.0 / 2.2);
+    if c > 0.0 {
+        (c.min(1.0) * 255.0) as u8
+    } else {
+        0
+    }
+}
+
+/// CS184's sample-rate colour map: blue (0) -> green (0.5) -> red (1).
+pub fn rate_color(rate: f32) -> [u8; 3] {
+    let (blue, green, red) = (Vec3::Z, Vec3::Y, Vec3::X);
+    let c = if rate <= 0.5 {
+        let t = (0.5 - rate) / 0.5;
+        blue * t + green * (1.0 - t)
+    } else {
+        let t = (1.0 - rate) / 0.5;
+        green * t + red * (1.0 - t)
+    };
+    [c.x, c.y, c.z].map(|v| (v.clamp(0.0, 1.0) * 255.0) as u8)
+}
+
+fn temp_path(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.partial-{}", std::process::id()))
+}
+
+/// Write with `write` to a temporary file beside `path`, then rename it.
+fn atomically(path: &Path, write: impl FnOnce(&Path) -> std::result::Result<(), String>) -> Result<()> {
+    let tmp = temp_path(path);
+    match write(&tmp) {
+        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            Error::new(format!("{}: cannot write: {e}", path.display()))
+        }),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(Error::new(format!("{}: cannot write: {e}", path.display())))
+        }
+    }
+}
+
+fn write_rgba_png(path: &Path, w: u32, h: u32, data: Vec<u8>) -> Result<()> {
+    atomically(path, |tmp| {
+        image::save_buffer_with_format(tmp, &data, w, h, image::ColorType::Rgba8, image::ImageFormat::Png).map_err(|e| e.to_string())
+    })
+}
+
+/// The main PNG, through CS184's tone step.
+pub fn write_png(path: &Path, img: &Rgb) -> Result<()> {
+    let mut data = Vec::with_capacity(img.pixels.len() * 4);
+    for p in &img.pixels {
+        data.extend_from_slice(&[tone_byte(p.x), tone_byte(p.y), tone_byte(p.z), 255]);
+    }
+    write_rgba_png(path, img.width, img.height, data)
+}
+
+/// `<name>_rate.png`: samples taken per pixel over the maximum, colour-mapped.
+pub fn write_rate_png(path: &Path, w: u32, h: u32, samples: &[u32], max_samples: u32) -> Result<()> {
+    let mut data = Vec::with_capacity(samples.len() * 4);
+    for &n in samples {
+        let [r, g, b] = rate_color(n as f32 / max_samples.max(1) as f32);
+        data.extend_from_slice(&[r, g, b, 255]);
+    }
+    write_rgba_png(path, w, h, data)
+}
+
+/// Linear 32-bit float OpenEXR (RGB).
+pub fn write_exr(path: &Path, img: &Rgb) -> Result<()> {
+    atomically(path, |tmp| {
+        exr::prelude::write_rgb_file(tmp, img.width as usize, img.height as usize, |x, y| {
+            let p = img.pixels[y * img.width as usize + x];
+            (p.x, p.y, p.z)
+        })
+        .map_err(|e| e.to_string())
+    })
+}
+
+/// Read an RGB(A) OpenEXR written by us or a reference renderer.
+pub fn read_exr(path: &Path) -> Result<Rgb> {
+    use exr::prelude::*;
+    let image = read_first_rgba_layer_from_file(
+        path,
+        |res, _| Rgb::new(res.width() as u32, res.height() as u32),
+        |img: &mut Rgb, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            let w = img.width as usize;
+            img.pixels[pos.y() * w + pos.x()] = Vec3::new(r, g, b);
+        },
+    )
+    .map_err(|e| crate::error::Error::new(format!("{}: cannot read OpenEXR: {e}", path.display())))?;
+    Ok(image.layer_data.channel_data.pixels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tone_step_matches_cs184() {
+        assert_eq!(tone_byte(0.0), 0);
+        assert_eq!(tone_byte(-1.0), 0);
+        assert_eq!(tone_byte(f32::NAN), 0);
+        assert_eq!(tone_byte(10.0), 255);
+        // (0.5*sqrt2)^(1/2.2) = 0.8540 -> 217.77 truncated.
+        assert_eq!(tone_byte(0.5), 217);
+    }
+
+    #[test]
+    fn rate_colours() {
+        assert_eq!(rate_color(1.0), [255, 0, 0]);
+        assert_eq!(rate_color(0.5), [0, 255, 0]);
+        assert_eq!(rate_color(0.0), [0, 0, 255]);
+    }
+}

@@ -1,0 +1,16 @@
+//! pathtracer: a physically based path tracer for the CS184 scenes, with
+//! interchangeable ray-traversal backends (native BVH, Embree, brute force).
+
+pub mod accel;
+pub mod bench;
+pub mod camera;
+pub mod cli;
+pub mod error;
+pub mod geometry;
+pub mod image_io;
+pub mod ray;
+pub mod render;
+pub mod rng;
+pub mod scene;
+
+pub use error::{Error, Result};

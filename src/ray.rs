@@ -1,0 +1,42 @@
+//! Rays and the validity rule every backend applies to them.
+
+use glam::Vec3;
+
+/// A ray `origin + t * dir`, restricted to the half-open range `tmin < t <= tmax`.
+///
+/// `dir` need not be normalised; `t` is then measured in units of `dir`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub tmin: f32,
+    pub tmax: f32,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Ray { origin, dir, tmin: 0.0, tmax: f32::INFINITY }
+    }
+
+    pub fn with_range(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
+        Ray { origin, dir, tmin, tmax }
+    }
+
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+
+    /// A ray every backend traces. Anything else (NaN or infinite origin or
+    /// direction, a zero direction, a NaN or negative `tmin`, NaN `tmax`,
+    /// `tmax < tmin`) hits nothing and is occluded by nothing, in every backend.
+    /// Embree's behaviour on such rays is undefined, so the check is ours.
+    #[inline]
+    pub fn is_valid(&self) -> bool {
+        self.origin.is_finite()
+            && self.dir.is_finite()
+            && self.dir != Vec3::ZERO
+            && self.tmin >= 0.0
+            && !self.tmax.is_nan()
+            && self.tmin <= self.tmax
+    }
+}

@@ -1,0 +1,23 @@
+//! Normal shading: the shading normal mapped to a colour, `n * 0.5 + 0.5`.
+
+use super::Integrator;
+use crate::accel::Traversal;
+use crate::ray::Ray;
+use crate::rng::Rng;
+use crate::scene::{Interaction, Scene};
+use glam::Vec3;
+
+pub struct NormalShading<'a> {
+    pub scene: &'a Scene,
+    pub accel: &'a dyn Traversal,
+}
+
+impl Integrator for NormalShading<'_> {
+    fn radiance(&self, ray: &Ray, _rng: &mut Rng, rays: &mut u64) -> Vec3 {
+        *rays += 1;
+        match self.accel.intersect(ray) {
+            Some(hit) => Interaction::new(self.scene, ray, &hit).ns * 0.5 + Vec3::splat(0.5),
+            None => Vec3::ZERO,
+        }
+    }
+}

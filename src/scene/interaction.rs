@@ -1,0 +1,44 @@
+//! "Describe the hit": everything shading needs, computed from a backend's
+//! `Hit` by code shared by all backends.
+
+use super::{Scene, Shape};
+use crate::accel::Hit;
+use crate::ray::Ray;
+use glam::Vec3;
+
+#[derive(Clone, Copy, Debug)]
+pub struct Interaction {
+    /// Hit point, from the barycentrics (triangles) or projected onto the
+    /// sphere, which is more accurate than `origin + t*dir` far from the origin.
+    pub p: Vec3,
+    /// Unit geometric normal, as wound (triangles) or outward (spheres);
+    /// not flipped towards the ray.
+    pub ng: Vec3,
+    /// Unit shading normal: interpolated vertex normals, or `ng`.
+    pub ns: Vec3,
+    pub t: f32,
+    pub geom_id: u32,
+    pub prim_id: u32,
+}
+
+impl Interaction {
+    pub fn new(scene: &Scene, ray: &Ray, hit: &Hit) -> Self {
+        let (p, ng, ns) = match &scene.shapes[hit.geom_id as usize] {
+            Shape::Mesh(m) => {
+                let tri = m.triangles[hit.prim_id as usize];
+                let [a, b, c] = tri.map(|i| m.positions[i as usize]);
+                let w = 1.0 - hit.u - hit.v;
+                let p = a * w + b * hit.u + c * hit.v;
+                let ng = (b - a).cross(c - a).normalize_or_zero();
+                let [na, nb, nc] = tri.map(|i| m.normals[i as usize]);
+                let ns = (na * w + nb * hit.u + nc * hit.v).normalize_or_zero();
+                (p, ng, if ns == Vec3::ZERO { ng } else { ns })
+            }
+            Shape::Sphere { center, radius } => {
+                let n = (ray.at(hit.t) - *center).normalize_or_zero();
+                (*center + n * *radius, n, n)
+            }
+        };
+        Interaction { p, ng, ns, t: hit.t, geom_id: hit.geom_id, prim_id: hit.prim_id }
+    }
+}

@@ -1,0 +1,165 @@
+//! The loaded scene: shapes for the backends, and everything shared code needs
+//! to describe a hit (normals, materials), light and camera.
+
+pub mod builtin;
+pub mod collada;
+pub mod interaction;
+pub mod material;
+
+pub use interaction::Interaction;
+pub use material::{Bsdf, Material};
+
+use crate::geometry::Aabb;
+use glam::{Mat4, Vec3};
+
+/// A triangle mesh in world space. `normals` are per-vertex, area-weighted
+/// (CS184's rule), computed by the loader; backends only read positions.
+#[derive(Clone, Debug, Default)]
+pub struct TriangleMesh {
+    pub positions: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+    pub normals: Vec<Vec3>,
+}
+
+impl TriangleMesh {
+    /// Area-weighted vertex normals: each face adds its (unnormalised) cross
+    /// product to its three vertices. Vertices with no non-degenerate face get
+    /// a zero normal, which `Interaction` replaces by the face normal.
+    pub fn compute_normals(&mut self) {
+        let mut n = vec![Vec3::ZERO; self.positions.len()];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| self.positions[i as usize]);
+            let f = (b - a).cross(c - a);
+            for &i in t {
+                n[i as usize] += f;
+            }
+        }
+        self.normals = n.into_iter().map(|v| v.normalize_or_zero()).collect();
+    }
+}
+
+/// Geometry a backend can intersect. Its index in `Scene::shapes` is the
+/// geometry id in `Hit::geom_id`.
+#[derive(Clone, Debug)]
+pub enum Shape {
+    Mesh(TriangleMesh),
+    Sphere { center: Vec3, radius: f32 },
+}
+
+impl Shape {
+    pub fn primitive_count(&self) -> usize {
+        match self {
+            Shape::Mesh(m) => m.triangles.len(),
+            Shape::Sphere { .. } => 1,
+        }
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        match self {
+            Shape::Mesh(m) => {
+                let mut b = Aabb::EMPTY;
+                for &p in &m.positions {
+                    b.grow(p);
+                }
+                b
+            }
+            Shape::Sphere { center, radius } => Aabb { min: *center - Vec3::splat(*radius), max: *center + Vec3::splat(*radius) },
+        }
+    }
+}
+
+/// What a shape is made of, parallel to `Scene::shapes`.
+#[derive(Clone, Debug)]
+pub struct Object {
+    /// The COLLADA node name, for messages.
+    pub name: String,
+    /// Index into `Scene::materials`.
+    pub material: usize,
+}
+
+/// A light as the file describes it. `transform` is the node's world matrix
+/// (up-axis fix included); the light-transport code derives positions and
+/// directions from it.
+#[derive(Clone, Debug)]
+pub struct LightDesc {
+    pub name: String,
+    pub kind: LightKind,
+    pub radiance: Vec3,
+    pub transform: Mat4,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightKind {
+    Ambient,
+    Directional,
+    Area,
+    Point,
+    Spot,
+}
+
+impl LightKind {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            LightKind::Ambient => "ambient",
+            LightKind::Directional => "directional",
+            LightKind::Area => "area",
+            LightKind::Point => "point",
+            LightKind::Spot => "spot",
+        }
+    }
+}
+
+/// The file's camera, before CS184's placement rule moves it (see `camera`).
+#[derive(Clone, Copy, Debug)]
+pub struct CameraDesc {
+    pub hfov_deg: f32,
+    pub vfov_deg: f32,
+    pub znear: f32,
+    pub zfar: f32,
+    /// CS184's `c_dir = normalize((T * (0,0,-1,1)).xyz)`: with w = 1 the
+    /// node's translation is included. The camera is placed on this side of
+    /// the scene's bounding-box centre.
+    pub c_dir: Vec3,
+}
+
+impl Default for CameraDesc {
+    fn default() -> Self {
+        CameraDesc { hfov_deg: 50.0, vfov_deg: 35.0, znear: 0.001, zfar: 1000.0, c_dir: Vec3::Z }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Base name of the file without `.dae` (CS184's `pathtracer_filename`).
+    pub name: String,
+    /// Where it came from, for messages: a path or `<built-in>`.
+    pub source: String,
+    pub shapes: Vec<Shape>,
+    pub objects: Vec<Object>,
+    pub materials: Vec<Material>,
+    pub lights: Vec<LightDesc>,
+    pub camera: CameraDesc,
+}
+
+impl Scene {
+    pub fn primitive_count(&self) -> usize {
+        self.shapes.iter().map(Shape::primitive_count).sum()
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.shapes.iter().map(|s| if let Shape::Mesh(m) = s { m.triangles.len() } else { 0 }).sum()
+    }
+
+    pub fn sphere_count(&self) -> usize {
+        self.shapes.iter().filter(|s| matches!(s, Shape::Sphere { .. })).count()
+    }
+
+    /// Bounds of all shapes (lights excluded), as CS184 computes them.
+    pub fn bounds(&self) -> Aabb {
+        self.shapes.iter().fold(Aabb::EMPTY, |b, s| b.union(&s.bounds()))
+    }
+
+    pub fn material_of(&self, geom_id: u32) -> &Material {
+        &self.materials[self.objects[geom_id as usize].material]
+    }
+}
