@@ -112,16 +112,14 @@ impl Bvh {
 
     #[inline]
     fn walk<F: FnMut(&Prim, &mut f32) -> bool>(&self, ray: &Ray, mut visit: F) {
-        let o = ray.origin;
-        let inv = safe_inverse(ray.dir);
-        let neg = [ray.dir.x < 0.0, ray.dir.y < 0.0, ray.dir.z < 0.0];
+        let slab = SlabRay::new(ray.origin, ray.dir);
         let mut tmax = ray.tmax;
         let mut stack = [0u32; STACK_SIZE];
         let mut sp = 0usize;
         let mut idx = 0usize;
         loop {
             let n = &self.nodes[idx];
-            if box_hit(n, o, inv, ray.tmin, tmax) {
+            if box_hit(n, &slab, ray.tmin, tmax) {
                 if n.count > 0 {
                     let first = n.offset as usize;
                     for p in &self.prims[first..first + n.count as usize] {
@@ -130,7 +128,7 @@ impl Bvh {
                         }
                     }
                 } else {
-                    let (near, far) = if neg[n.axis as usize] { (n.offset as usize, idx + 1) } else { (idx + 1, n.offset as usize) };
+                    let (near, far) = if slab.neg[n.axis as usize] { (n.offset as usize, idx + 1) } else { (idx + 1, n.offset as usize) };
                     stack[sp] = far as u32;
                     sp += 1;
                     idx = near;
@@ -192,28 +190,43 @@ impl Traversal for Bvh {
     }
 }
 
-/// 1/d with zero components replaced by a huge finite value of the same sign,
-/// so a slab the origin lies exactly on gives 0 instead of 0*inf = NaN.
-#[inline]
-fn safe_inverse(d: Vec3) -> Vec3 {
-    let f = |x: f32| if x == 0.0 { 1.0f32.copysign(x) * 1.0e32 } else { 1.0 / x };
-    Vec3::new(f(d.x), f(d.y), f(d.z))
-}
-
 /// Ize's conservative factor, 1 + 2*gamma(3) with gamma(n) = n*eps/(1 - n*eps).
 const ROBUST_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
+/// Per-ray constants of the slab test. `inv` is the true reciprocal, with
+/// infinities for zero components; the near/far planes are chosen by the sign
+/// bit (so -0 counts as negative). A zero component with the origin exactly on
+/// a slab plane gives 0 * inf = NaN, which the comparisons in `box_hit` ignore:
+/// the ray then runs inside the closed slab, which constrains nothing.
+#[derive(Clone, Copy)]
+struct SlabRay {
+    o: Vec3,
+    inv: Vec3,
+    neg: [bool; 3],
+}
+
+impl SlabRay {
+    #[inline]
+    fn new(o: Vec3, d: Vec3) -> Self {
+        SlabRay { o, inv: Vec3::ONE / d, neg: [d.x.is_sign_negative(), d.y.is_sign_negative(), d.z.is_sign_negative()] }
+    }
+}
+
 #[inline(always)]
-fn box_hit(n: &Node, o: Vec3, inv: Vec3, tmin: f32, tmax: f32) -> bool {
+fn box_hit(n: &Node, r: &SlabRay, tmin: f32, tmax: f32) -> bool {
     let mut t0 = tmin;
     let mut t1 = tmax;
     for a in 0..3 {
-        let near = (n.min[a] - o[a]) * inv[a];
-        let far = (n.max[a] - o[a]) * inv[a];
-        let (near, far) = if near > far { (far, near) } else { (near, far) };
-        t0 = if near > t0 { near } else { t0 };
-        let far = far * ROBUST_SCALE;
-        t1 = if far < t1 { far } else { t1 };
+        let (lo, hi) = if r.neg[a] { (n.max[a], n.min[a]) } else { (n.min[a], n.max[a]) };
+        let near = (lo - r.o[a]) * r.inv[a];
+        let far = (hi - r.o[a]) * r.inv[a] * ROBUST_SCALE;
+        // Written so that a NaN never changes t0 or t1.
+        if near > t0 {
+            t0 = near;
+        }
+        if far < t1 {
+            t1 = far;
+        }
     }
     t0 <= t1
 }

@@ -88,6 +88,17 @@ pub trait Traversal: Send + Sync {
             *o = self.occluded(r);
         }
     }
+
+    /// `intersect_batch` for rays known to be coherent (camera rays of a
+    /// tile, shadow rays towards one light), which packet tracing can exploit.
+    fn intersect_coherent(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.intersect_batch(rays, hits)
+    }
+
+    /// `occluded_batch` for coherent rays.
+    fn occluded_coherent(&self, rays: &[Ray], out: &mut [bool]) {
+        self.occluded_batch(rays, out)
+    }
 }
 
 /// The backends selectable with `--backend`.

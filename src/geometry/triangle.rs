@@ -3,8 +3,8 @@
 //! The ray is sheared so that it points down +z from the origin; the triangle
 //! is then tested in 2D with edge functions. Adjacent triangles evaluate the
 //! same edge function with the same operands, so a ray through a shared edge
-//! or vertex hits at least one of them: no cracks. When an edge function is
-//! exactly zero the test is repeated in f64 so the sign is decided exactly.
+//! or vertex hits at least one of them: no cracks. An edge function that is
+//! exactly zero in f32 is recomputed in f64 so its sign is decided exactly.
 
 use glam::Vec3;
 
@@ -68,16 +68,23 @@ pub fn intersect_triangle(
     let cx = c[kx] - rt.sx * c[kz];
     let cy = c[ky] - rt.sy * c[kz];
 
-    let mut e0 = cx * by - cy * bx; // weight of p0
-    let mut e1 = ax * cy - ay * cx; // weight of p1
-    let mut e2 = bx * ay - by * ax; // weight of p2
-    if e0 == 0.0 || e1 == 0.0 || e2 == 0.0 {
-        // Exact sign on the edge: redo the 2x2 determinants in double precision.
-        let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-        e0 = (cx * by - cy * bx) as f32;
-        e1 = (ax * cy - ay * cx) as f32;
-        e2 = (bx * ay - by * ax) as f32;
-    }
+    // Each edge function depends only on its edge (negated when the
+    // neighbour walks the edge the other way), so adjacent triangles agree on
+    // the sign. An exact zero is ambiguous: only that edge function is redone
+    // in f64 (products of floats are exact there), which keeps the agreement;
+    // redoing all three would not.
+    let edge = |px: f32, py: f32, qx: f32, qy: f32| -> f32 {
+        let e = qx * py - qy * px;
+        if e != 0.0 {
+            return e;
+        }
+        let e64 = qx as f64 * py as f64 - qy as f64 * px as f64;
+        // Keep the sign even where the f64 value is below f32's range.
+        if e64 == 0.0 { 0.0 } else { (e64 as f32).abs().max(f32::MIN_POSITIVE).copysign(e64 as f32) }
+    };
+    let e0 = edge(bx, by, cx, cy); // B->C: weight of p0
+    let e1 = edge(cx, cy, ax, ay); // C->A: weight of p1
+    let e2 = edge(ax, ay, bx, by); // A->B: weight of p2
     if (e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0) {
         return None;
     }

@@ -1,0 +1,112 @@
+//! Whole-program behaviour of the `pathtracer` binary.
+
+mod common;
+
+use pathtracer::image_io::read_exr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pathtracer-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run(dir: &Path, args: &[&str]) -> Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).args(args).current_dir(dir).env("CI", "true").output().unwrap();
+    assert!(
+        out.status.success(),
+        "pathtracer {args:?} failed: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+#[test]
+fn no_arguments_renders_the_builtin_scene_into_the_current_directory() {
+    let d = scratch("default");
+    let out = run(&d, &[]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let png = d.join("CBspheres_lambertian.png");
+    assert!(png.exists(), "no image written; stdout: {stdout}");
+    assert!(stdout.contains("wrote CBspheres_lambertian.png"), "{stdout}");
+    for field in ["primitives", "backend native", "BVH build", "render", "rays", "Mrays/s"] {
+        assert!(stdout.contains(field), "summary lacks '{field}': {stdout}");
+    }
+    let img = image::open(&png).unwrap().to_rgba8();
+    assert_eq!(img.dimensions(), (800, 600));
+    // The box fills the middle of the frame; the corners look past it (black).
+    assert_ne!(img.get_pixel(400, 300).0, [0, 0, 0, 255]);
+    assert_eq!(img.get_pixel(0, 0).0, [0, 0, 0, 255]);
+}
+
+fn render_exr(dir: &Path, name: &str, args: &[&str]) -> pathtracer::image_io::Rgb {
+    let exr = dir.join(format!("{name}.exr"));
+    let png = dir.join(format!("{name}.png"));
+    let mut all: Vec<&str> = args.to_vec();
+    all.extend(["--exr", exr.to_str().unwrap(), "-f", png.to_str().unwrap()]);
+    run(dir, &all);
+    read_exr(&exr).unwrap()
+}
+
+#[test]
+fn cow_normals_are_identical_with_and_without_the_bvh() {
+    let d = scratch("cow");
+    let cow = common::scene_path("meshedit", "cow");
+    let cow = cow.to_str().unwrap();
+    let native = render_exr(&d, "native", &["-r", "480", "360", "--backend", "native", cow]);
+    let brute = render_exr(&d, "brute", &["-r", "480", "360", "--backend", "brute", cow]);
+    assert_eq!((native.width, native.height), (480, 360));
+    let lit = native.pixels.iter().filter(|p| p.length() > 0.0).count();
+    assert!(lit > 20_000, "cow covers only {lit} pixels");
+    assert!(native == brute, "native and brute normal images differ");
+}
+
+#[test]
+fn same_seed_same_image_at_any_thread_count() {
+    let d = scratch("threads");
+    let a = render_exr(&d, "t1", &["-t", "1", "-s", "4", "-r", "160", "120", "--seed", "9"]);
+    let b = render_exr(&d, "t2", &["-t", "2", "-s", "4", "-r", "160", "120", "--seed", "9"]);
+    assert!(a == b, "-t 1 and -t 2 differ");
+    let c = render_exr(&d, "seed", &["-t", "2", "-s", "4", "-r", "160", "120", "--seed", "10"]);
+    assert!(a != c, "the seed changes nothing");
+}
+
+#[test]
+fn cell_is_a_crop_of_the_full_frame_and_writes_a_rate_image() {
+    let d = scratch("cell");
+    let full = render_exr(&d, "full", &["-r", "64", "48"]);
+    // CS184 frame coordinates: y counts up from the bottom row.
+    let cell = render_exr(&d, "cell", &["-r", "64", "48", "-p", "10", "5", "20", "16"]);
+    assert_eq!((cell.width, cell.height), (20, 16));
+    for y in 0..16 {
+        for x in 0..20 {
+            // Cell row y (top first) is frame row 5 + 15 - y from the bottom,
+            // which is image row 47 - (20 - y) from the top.
+            assert_eq!(cell.get(x, y), full.get(10 + x, 47 - (5 + 15 - y)), "pixel {x},{y}");
+        }
+    }
+    assert!(d.join("cell_rate.png").exists());
+}
+
+#[test]
+fn camera_settings_round_trip_through_a_file() {
+    let d = scratch("camera");
+    let cam = d.join("cam.txt");
+    let a = render_exr(&d, "a", &["-r", "64", "48", "--write-camera", cam.to_str().unwrap()]);
+    let text = std::fs::read_to_string(&cam).unwrap();
+    assert_eq!(text.lines().count(), 6, "{text}");
+    let b = render_exr(&d, "b", &["-r", "64", "48", "-c", cam.to_str().unwrap()]);
+    assert!(a == b, "rendering with the written camera file changed the image");
+}
+
+#[test]
+fn lighting_flags_are_refused_until_light_transport_exists() {
+    let d = scratch("later");
+    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).args(["-m", "3"]).current_dir(&d).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("-m") && err.contains("not implemented"), "{err}");
+}
