@@ -152,8 +152,8 @@ impl Camera {
             .split_ascii_whitespace()
             .map(|w| w.parse::<f32>().map_err(|_| Error::new(format!("camera settings: '{w}' is not a number"))))
             .collect::<Result<_>>()?;
-        if v.len() != 31 {
-            crate::bail!("camera settings: expected 31 numbers in 6 lines, got {}", v.len());
+        if v.len() != 30 {
+            crate::bail!("camera settings: expected 30 numbers in 6 lines, got {}", v.len());
         }
         if let Some(x) = v.iter().find(|x| !x.is_finite()) {
             crate::bail!("camera settings: non-finite value {x}");
@@ -186,8 +186,8 @@ impl Camera {
             screen_w: v[25] as u32,
             screen_h: v[26] as u32,
             screen_dist: v[27],
-            focal_distance: v[29],
-            lens_radius: v[30],
+            focal_distance: v[28],
+            lens_radius: v[29],
         };
         Ok(())
     }

@@ -1,0 +1,226 @@
+//! Embree against the native BVH: every shipped scene, camera and random
+//! rays, closest hits, occlusion, batch calls, and normal-shading images.
+//!
+//! Without Embree in the build these tests say so loudly and skip (CI sets
+//! PATHTRACER_REQUIRE_EMBREE=1, which turns that into a failure).
+
+mod common;
+
+use pathtracer::accel::{BackendKind, Hit, Traversal};
+use pathtracer::bench::{camera_rays, random_rays};
+use pathtracer::camera::Camera;
+use pathtracer::ray::Ray;
+use pathtracer::render::{self, normals::NormalShading, RenderSettings};
+use pathtracer::scene::Scene;
+use rayon::prelude::*;
+
+fn embree_present() -> bool {
+    let present = common::backends().contains(&BackendKind::Embree);
+    if !present {
+        eprintln!("SKIPPED: Embree is not in this build; the cross-check did not run");
+    }
+    present
+}
+
+const REL: f32 = 1e-5;
+
+fn close(a: f32, b: f32) -> bool {
+    (a - b).abs() <= REL * a.abs().max(b.abs()).max(1e-30)
+}
+
+#[derive(Default, Debug)]
+struct Tally {
+    rays: usize,
+    hits: usize,
+    ties: usize,
+    /// Same primitive, t or u/v apart by more than 1e-5 but within the f32 bound.
+    widened: usize,
+    errors: Vec<String>,
+}
+
+/// Compare one ray. A different primitive is accepted as a tie only when the
+/// two backends' hits lie within 1e-5 relative t (two nearest candidates at
+/// the same distance, e.g. a shared edge); everything else must agree.
+///
+/// t must agree to 1e-5 relative and barycentrics to 1e-5, or, on triangles that are small seen from
+/// far away, to their f32 error bound: both algorithms shear or project
+/// coordinates of size D (the distance from the ray origin), so u and v carry
+/// an error of a few ulps times D / (h cos), h the triangle's smallest height
+/// and cos the incidence cosine.
+fn compare(scene: &Scene, i: usize, r: &Ray, n: Option<Hit>, e: Option<Hit>, occ_n: bool, occ_e: bool) -> (bool, bool, Option<String>) {
+    let mut tie = false;
+    let mut widened = false;
+    let err = match (n, e) {
+        (None, None) => None,
+        (Some(a), Some(b)) if (a.geom_id, a.prim_id) == (b.geom_id, b.prim_id) => {
+            let du = (a.u - b.u).abs().max((a.v - b.v).abs());
+            let (bound, t_abs) = error_bounds(scene, r, &a);
+            let dt = (a.t - b.t).abs();
+            let t_ok = close(a.t, b.t) || dt <= t_abs;
+            widened = (du > REL && du <= bound) || (!close(a.t, b.t) && t_ok);
+            (!t_ok || du > bound.max(REL)).then(|| format!("ray {i}: t/u/v differ: native {a:?} embree {b:?} (uv bound {bound:e})"))
+        }
+        (Some(a), Some(b)) if close(a.t, b.t) => {
+            tie = true;
+            None
+        }
+        _ => Some(format!("ray {i} {r:?}: native {n:?} embree {e:?}")),
+    };
+    let err = err.or_else(|| (occ_n != occ_e).then(|| format!("ray {i} {r:?}: occluded native {occ_n} embree {occ_e}")));
+    (tie, widened, err)
+}
+
+/// f32 error bounds of (u and v, t) for a hit on a triangle seen from distance D.
+/// t's absolute error is a few ulps of D (in units of the ray direction),
+/// which exceeds 1e-5 relative only when t is tiny compared to D.
+fn error_bounds(scene: &Scene, r: &Ray, h: &Hit) -> (f32, f32) {
+    match &scene.shapes[h.geom_id as usize] {
+        pathtracer::scene::Shape::Mesh(m) => {
+            let [a, b, c] = m.triangles[h.prim_id as usize].map(|i| m.positions[i as usize]);
+            let area2 = (b - a).cross(c - a).length();
+            let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+            let height = area2 / longest;
+            let d = [a, b, c].iter().map(|p| (*p - r.origin).length()).fold(0.0f32, f32::max);
+            // Grazing incidence stretches the projected triangle's errors by 1/cos.
+            let cos = ((b - a).cross(c - a).normalize().dot(r.dir.normalize())).abs().max(1e-3);
+            (16.0 * f32::EPSILON * d / (height * cos), 16.0 * f32::EPSILON * d / r.dir.length())
+        }
+        _ => (REL, 0.0),
+    }
+}
+
+fn cross_check(scene: &Scene, native: &dyn Traversal, embree: &dyn Traversal, rays: &[Ray]) -> Tally {
+    let per: Vec<(bool, bool, bool, Option<String>)> = rays
+        .par_iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let (n, e) = (native.intersect(r), embree.intersect(r));
+            let (tie, widened, err) = compare(scene, i, r, n, e, native.occluded(r), embree.occluded(r));
+            // Occlusion on a segment ending before the closest hit, by more
+            // than the f32 uncertainty of t (rays starting a few ulps from a
+            // surface have a t that neither backend knows to 0.1 %).
+            let err = err.or_else(|| {
+                let h = n?;
+                let margin = (h.t * 1e-3).max(4.0 * error_bounds(scene, r, &h).1);
+                if h.t - margin <= r.tmin {
+                    return None;
+                }
+                let s = Ray { tmax: h.t - margin, ..*r };
+                let (a, b) = (native.occluded(&s), embree.occluded(&s));
+                (a != b).then(|| format!("ray {i} {s:?} shortened (closest {n:?}): occluded native {a} embree {b}"))
+            });
+            (n.is_some(), tie, widened, err)
+        })
+        .collect();
+    Tally {
+        rays: rays.len(),
+        hits: per.iter().filter(|p| p.0).count(),
+        ties: per.iter().filter(|p| p.1).count(),
+        widened: per.iter().filter(|p| p.2).count(),
+        errors: per.into_iter().filter_map(|p| p.3).collect(),
+    }
+}
+
+#[test]
+fn embree_agrees_with_native_on_every_shipped_scene() {
+    if !embree_present() {
+        return;
+    }
+    let mut report = Vec::new();
+    for path in common::shipped_scenes() {
+        let scene = common::load(&path);
+        let native = common::build(BackendKind::Native, &scene.shapes);
+        let embree = common::build(BackendKind::Embree, &scene.shapes);
+        let camera = Camera::from_scene(&scene);
+        let mut rays = camera_rays(&camera, 320, 240);
+        rays.extend(random_rays(&scene, 76_800, 11));
+        let t = cross_check(&scene, native.as_ref(), embree.as_ref(), &rays);
+        assert!(t.errors.is_empty(), "{}: {} disagreements, first: {}", path.display(), t.errors.len(), t.errors[0]);
+        // Ties are equal-distance coincidences (rays through a shared edge);
+        // pixel-centre camera rays can line up with an edge of a simple mesh
+        // (the cube's face diagonals: 0.11 %), so allow up to 0.5 %.
+        assert!(t.ties * 200 <= t.hits.max(1), "{}: {} ties in {} hits", path.display(), t.ties, t.hits);
+        report.push(format!("{}: {} rays, {} hits, {} ties, {} t/u/v beyond 1e-5 (within the f32 bound)", scene.name, t.rays, t.hits, t.ties, t.widened));
+    }
+    eprintln!("{}", report.join("\n"));
+}
+
+#[test]
+fn embree_batches_match_single_rays() {
+    if !embree_present() {
+        return;
+    }
+    let scene = common::load(&common::scene_path("sky", "CBbunny"));
+    let embree = common::build(BackendKind::Embree, &scene.shapes);
+    let mut rays = camera_rays(&Camera::from_scene(&scene), 64, 48);
+    rays.extend(random_rays(&scene, 3000, 5));
+    // Invalid rays inside a batch must not disturb their neighbours.
+    rays[7].dir = glam::Vec3::ZERO;
+    rays[100].origin.x = f32::NAN;
+    let single: Vec<Option<Hit>> = rays.iter().map(|r| embree.intersect(r)).collect();
+    let single_occ: Vec<bool> = rays.iter().map(|r| embree.occluded(r)).collect();
+    let mut hits = vec![None; rays.len()];
+    let mut occ = vec![false; rays.len()];
+    for coherent in [false, true] {
+        if coherent {
+            embree.intersect_coherent(&rays, &mut hits);
+            embree.occluded_coherent(&rays, &mut occ);
+        } else {
+            embree.intersect_batch(&rays, &mut hits);
+            embree.occluded_batch(&rays, &mut occ);
+        }
+        assert_eq!(occ, single_occ, "coherent={coherent}");
+        for (i, (a, b)) in hits.iter().zip(&single).enumerate() {
+            let ok = match (a, b) {
+                (None, None) => true,
+                (Some(a), Some(b)) => close(a.t, b.t) && (a.prim_id == b.prim_id || close(a.t, b.t)),
+                _ => false,
+            };
+            assert!(ok, "coherent={coherent} ray {i}: batch {a:?} single {b:?}");
+        }
+    }
+    assert!(hits[7].is_none() && hits[100].is_none());
+}
+
+#[test]
+fn normal_images_of_cornell_boxes_are_identical_but_for_ties() {
+    if !embree_present() {
+        return;
+    }
+    for path in common::shipped_scenes().into_iter().filter(|p| p.file_stem().unwrap().to_string_lossy().starts_with("CB")) {
+        let scene = common::load(&path);
+        let native = common::build(BackendKind::Native, &scene.shapes);
+        let embree = common::build(BackendKind::Embree, &scene.shapes);
+        let mut camera = Camera::from_scene(&scene);
+        camera.set_screen_size(320, 240);
+        let settings = RenderSettings { width: 320, height: 240, spp: 1, seed: 0, region: None, adaptive: None, progress: false };
+        let a = render::render(&camera, &NormalShading { scene: &scene, accel: native.as_ref() }, &settings).image;
+        let b = render::render(&camera, &NormalShading { scene: &scene, accel: embree.as_ref() }, &settings).image;
+        let (mut ties, mut last_bits, mut png_bytes) = (0, 0, 0);
+        for y in 0..240u32 {
+            for x in 0..320u32 {
+                let (pa, pb) = (a.get(x, y), b.get(x, y));
+                if pa == pb {
+                    continue;
+                }
+                // The pixel's ray (1 spp: the pixel centre; image row 0 is the top).
+                let r = camera.generate_ray((x as f32 + 0.5) / 320.0, ((239 - y) as f32 + 0.5) / 240.0);
+                let (hn, he) = (native.intersect(&r), embree.intersect(&r));
+                let tie = matches!((hn, he), (Some(p), Some(q)) if (p.geom_id, p.prim_id) != (q.geom_id, q.prim_id) && close(p.t, q.t));
+                // Same primitive: only the barycentrics' last bits may differ.
+                let same = matches!((hn, he), (Some(p), Some(q)) if (p.geom_id, p.prim_id) == (q.geom_id, q.prim_id))
+                    && (pa - pb).abs().max_element() <= 1e-4;
+                assert!(tie || same, "{}: pixel {x},{y} differs: {pa} vs {pb} ({hn:?} vs {he:?})", path.display());
+                ties += tie as usize;
+                last_bits += same as usize;
+                let tone = |c: glam::Vec3| [c.x, c.y, c.z].map(pathtracer::image_io::tone_byte);
+                png_bytes += (same && tone(pa) != tone(pb)) as usize;
+            }
+        }
+        assert!(ties <= 320 * 240 / 1000, "{}: {ties} tie pixels", path.display());
+        // Floats differ in the last bits wherever the barycentrics do; the
+        // 8-bit images a user sees must be identical but for rare rounding.
+        assert!(png_bytes <= 320 * 240 / 1000, "{}: {png_bytes} pixels differ in the PNG", path.display());
+        eprintln!("{}: {ties} tie pixels, {last_bits} pixels differing in the last bits of the barycentrics, {png_bytes} of them visible in the 8-bit PNG", scene.name);
+    }
+}
