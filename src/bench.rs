@@ -24,8 +24,8 @@ pub struct BenchArgs {
     /// scenes/ or ../shared/scenes/cs184), or sphere:N for a procedural
     /// lat-long sphere of about N triangles. Default: cow maxplanck CBbunny beetle.
     pub scenes: Vec<String>,
-    /// Backends to time
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BackendKind::Native, BackendKind::Brute])]
+    /// Backends to time [default: native, embree (when built in), brute]
+    #[arg(long, value_enum, value_delimiter = ',')]
     pub backends: Vec<BackendKind>,
     /// Rays per throughput measurement (brute uses a 1/32 subset)
     #[arg(long, default_value_t = 1 << 20)]
@@ -41,7 +41,10 @@ pub struct BenchArgs {
     pub markdown: Option<PathBuf>,
 }
 
-pub const DEFAULT_SCENES: [&str; 4] = ["cow", "maxplanck", "CBbunny", "beetle"];
+pub const DEFAULT_SCENES: [&str; 5] = ["cow", "maxplanck", "CBbunny", "beetle", "sphere:1M"];
+
+/// Brute force is skipped above this many primitives (hours per measurement).
+const BRUTE_LIMIT: usize = 100_000;
 
 /// Folders searched for scene names, in order.
 pub fn scene_dirs() -> Vec<PathBuf> {
@@ -169,19 +172,34 @@ pub fn shadow_rays(scene: &Scene, accel: &dyn Traversal, primary: &[Ray]) -> Vec
         .collect()
 }
 
-/// Best-of-`reps` Mrays/s of closest-hit (or occlusion) queries on `threads` threads.
-fn throughput(accel: &dyn Traversal, rays: &[Ray], occlusion: bool, threads: usize, reps: usize) -> f64 {
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum RayKind {
+    Camera,
+    Shadow,
+    Random,
+}
+
+/// Best-of-`reps` Mrays/s on `threads` threads, chunks of 4096 rays. Camera
+/// and shadow rays go through the coherent batch calls, random rays through
+/// the plain ones.
+fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize, reps: usize) -> f64 {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
     let mut best = f64::INFINITY;
     for _ in 0..reps {
         let start = Instant::now();
         pool.install(|| {
-            rays.par_chunks(4096).for_each(|chunk| {
-                if occlusion {
+            rays.par_chunks(4096).for_each(|chunk| match kind {
+                RayKind::Shadow => {
                     let mut out = vec![false; chunk.len()];
-                    accel.occluded_batch(chunk, &mut out);
+                    accel.occluded_coherent(chunk, &mut out);
                     std::hint::black_box(&out);
-                } else {
+                }
+                RayKind::Camera => {
+                    let mut out = vec![None; chunk.len()];
+                    accel.intersect_coherent(chunk, &mut out);
+                    std::hint::black_box(&out);
+                }
+                RayKind::Random => {
                     let mut out = vec![None; chunk.len()];
                     accel.intersect_batch(chunk, &mut out);
                     std::hint::black_box(&out);
@@ -202,6 +220,68 @@ pub struct Sample {
     pub mrays_per_s: f64,
 }
 
+fn ratio_table(samples: &[Sample], threads: &[usize]) -> String {
+    let mut out = String::new();
+    let mut scenes: Vec<&str> = Vec::new();
+    for s in samples {
+        if !scenes.contains(&s.scene.as_str()) {
+            scenes.push(&s.scene);
+        }
+    }
+    let find = |sc: &str, rays: &str, t: usize, b: BackendKind| {
+        samples.iter().find(|s| s.scene == sc && s.rays == rays && s.threads == t && s.backend == b).map(|s| s.mrays_per_s)
+    };
+    let mut header = String::from("| scene |");
+    let mut rule = String::from("|---|");
+    for rays in ["camera", "shadow", "random"] {
+        for &t in threads {
+            let _ = write!(header, " {rays} {t}T |");
+            rule.push_str("---:|");
+        }
+    }
+    let mut rows = String::new();
+    for sc in scenes {
+        let mut row = format!("| {sc} |");
+        let mut any = false;
+        for rays in ["camera", "shadow", "random"] {
+            for &t in threads {
+                match (find(sc, rays, t, BackendKind::Native), find(sc, rays, t, BackendKind::Embree)) {
+                    (Some(n), Some(e)) => {
+                        any = true;
+                        let _ = write!(row, " {:.2} |", n / e);
+                    }
+                    _ => row.push_str(" – |"),
+                }
+            }
+        }
+        if any {
+            let _ = writeln!(rows, "{row}");
+        }
+    }
+    if !rows.is_empty() {
+        let _ = writeln!(out, "{header}\n{rule}");
+        out.push_str(&rows);
+    }
+    out
+}
+
+/// Embree's batch calls compared on one thread (which one the backend uses
+/// for coherent and incoherent batches was chosen from these numbers).
+#[cfg(has_embree)]
+fn embree_modes(scene: &Scene, cam: &[Ray], rnd: &[Ray], shadow: &[Ray], rows: &mut String) -> Result<()> {
+    use crate::accel::embree::{BatchMode, EmbreeBackend};
+    let mut e = EmbreeBackend::build(&scene.shapes, 1)?;
+    for (label, rays, rk) in [("camera", cam, RayKind::Camera), ("shadow", shadow, RayKind::Shadow), ("random", rnd, RayKind::Random)] {
+        let mut cells = Vec::new();
+        for mode in [BatchMode::Loop, BatchMode::Stream, BatchMode::Packet8] {
+            e.set_batch_modes(mode, mode);
+            cells.push(format!("{:.2}", throughput(&e, rays, rk, 1, 3)));
+        }
+        let _ = writeln!(rows, "| {} | {label} | {} |", scene.name, cells.join(" | "));
+    }
+    Ok(())
+}
+
 /// The seed write-up's render timings (normal shading), where it gives them.
 fn seed_timing(scene: &str) -> (&'static str, &'static str) {
     match scene {
@@ -213,6 +293,16 @@ fn seed_timing(scene: &str) -> (&'static str, &'static str) {
 
 pub fn run(args: &BenchArgs) -> Result<()> {
     let all = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let backends: Vec<BackendKind> = if args.backends.is_empty() {
+        let mut v = vec![BackendKind::Native];
+        if accel::embree::available() {
+            v.push(BackendKind::Embree);
+        }
+        v.push(BackendKind::Brute);
+        v
+    } else {
+        args.backends.clone()
+    };
     let names: Vec<String> = if args.scenes.is_empty() { DEFAULT_SCENES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     let mut thread_counts = vec![1];
     if all > 1 {
@@ -224,6 +314,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let _ = writeln!(md, "| scene | prims | backend | build ms | MiB | B/prim | camera 1T | camera {all}T | shadow 1T | shadow {all}T | random 1T | random {all}T |");
     let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut render_rows = String::new();
+    #[allow(unused_mut)]
+    let mut mode_rows = String::new();
     for name in &names {
         let scene = load_bench_scene(name)?;
         let prims = scene.primitive_count();
@@ -232,7 +324,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let cam: Vec<Ray> = cam_all.iter().cycle().take(args.rays).copied().collect();
         let rnd = random_rays(&scene, args.rays, 1);
         let mut shadow: Option<Vec<Ray>> = None;
-        for &kind in &args.backends {
+        for &kind in &backends {
+            if kind == BackendKind::Brute && prims > BRUTE_LIMIT {
+                let _ = writeln!(md, "| {} | {} | brute | – | – | – | skipped above {} primitives |", scene.name, prims, BRUTE_LIMIT);
+                continue;
+            }
             let built = match accel::build(kind, &scene.shapes, all) {
                 Ok(b) => b,
                 Err(e) => {
@@ -249,9 +345,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let take = |v: &[Ray]| -> Vec<Ray> { v.iter().step_by(sub).copied().collect() };
             let (cam_s, sh_s, rnd_s) = (take(&cam), take(sh), take(&rnd));
             let mut cells = Vec::new();
-            for (label, rays, occ) in [("camera", &cam_s, false), ("shadow", &sh_s, true), ("random", &rnd_s, false)] {
+            for (label, rays, rk) in [("camera", &cam_s, RayKind::Camera), ("shadow", &sh_s, RayKind::Shadow), ("random", &rnd_s, RayKind::Random)] {
                 for &t in &thread_counts {
-                    let m = throughput(a, rays, occ, t, reps);
+                    let m = throughput(a, rays, rk, t, reps);
                     samples.push(Sample { scene: scene.name.clone(), rays: label, threads: t, backend: kind, mrays_per_s: m });
                     cells.push(m);
                 }
@@ -273,7 +369,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 cells.iter().map(|c| format!("{c:.2}")).collect::<Vec<_>>().join(" | ")
             );
         }
-        if !args.no_render {
+        #[cfg(has_embree)]
+        if backends.contains(&BackendKind::Embree) {
+            embree_modes(&scene, &cam, &rnd, shadow.as_deref().unwrap_or(&[]), &mut mode_rows)?;
+        }
+        if !args.no_render && scene.source != "<procedural>" {
             let mut times = Vec::new();
             for kind in [BackendKind::Native, BackendKind::Brute] {
                 let built = accel::build(kind, &scene.shapes, all)?;
@@ -297,6 +397,17 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 seed_brute
             );
         }
+    }
+    let ratios = ratio_table(&samples, &thread_counts);
+    if !ratios.is_empty() {
+        let _ = writeln!(md, "\nnative ÷ Embree throughput, from this run:\n");
+        md.push_str(&ratios);
+    }
+    if !mode_rows.is_empty() {
+        let _ = writeln!(md, "\nEmbree batch calls, 1 thread, Mrays/s (loop of rtcIntersect1 / rtcIntersect1M stream / rtcIntersect8 packets):\n");
+        let _ = writeln!(md, "| scene | rays | loop | stream | packet8 |");
+        let _ = writeln!(md, "|---|---|---:|---:|---:|");
+        md.push_str(&mode_rows);
     }
     if !render_rows.is_empty() {
         let _ = writeln!(md, "\nNormal-shading render, 480x360, 1 spp, {all} threads (seconds; seed: CS184 write-up, settings unknown):\n");

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# The project's test command (README, CI): installs missing system packages,
+# runs the whole suite optimised with Embree, then checks that a build with
+# Embree hidden from build.rs still passes the rest of the suite.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install-deps.sh
+
+echo "== test suite (with Embree) =="
+PATHTRACER_REQUIRE_EMBREE=1 cargo test --release
+
+echo "== test suite with Embree hidden (PATHTRACER_NO_EMBREE=1) =="
+# The BVH-vs-brute oracle test touches no Embree code and takes two minutes,
+# so this second pass skips it; everything else runs again.
+PATHTRACER_NO_EMBREE=1 CARGO_TARGET_DIR=target/no-embree cargo test --release -- --skip native_bvh_matches_brute_force
