@@ -4,7 +4,9 @@ use crate::accel::{self, BackendKind};
 use crate::camera::{Camera, DEFAULT_HEIGHT, DEFAULT_WIDTH};
 use crate::error::{Error, Result};
 use crate::image_io;
-use crate::render::{self, normals::NormalShading, Adaptive, Integrator, Region, RenderSettings};
+use crate::light::Lights;
+use crate::render::{self, normals::NormalShading, path::PathTracer, Adaptive, Integrator, Region, RenderSettings};
+use crate::scene::Bsdf;
 use crate::scene::{builtin, collada, Scene};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
@@ -33,6 +35,8 @@ pub enum Command {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum IntegratorKind {
+    /// Light transport: direct lighting (-m 1) or global illumination (-m > 1).
+    Path,
     /// Shading normal as colour, n*0.5+0.5 (CS184's normal_shading).
     Normals,
 }
@@ -78,8 +82,15 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value_t = BackendKind::Native)]
     pub backend: BackendKind,
     /// What to compute per camera ray
-    #[arg(long, value_enum, default_value_t = IntegratorKind::Normals)]
+    #[arg(long, value_enum, default_value_t = IntegratorKind::Path)]
     pub integrator: IntegratorKind,
+    /// Disable Russian roulette (paths then always run to -m bounces)
+    #[arg(long)]
+    pub no_rr: bool,
+    /// With -a: decide each pixel's sample count on pilot samples that are
+    /// then discarded (unbiased; CS184's rule decides on the samples it keeps)
+    #[arg(long, requires = "adaptive")]
+    pub adaptive_pilot: bool,
     /// Seed of the per-pixel random streams
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -175,7 +186,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             if !(tol > 0.0 && tol.is_finite()) {
                 crate::bail!("-a {batch} {tol}: the tolerance must be a positive number");
             }
-            Some(Adaptive { batch, tolerance: tol })
+            Some(Adaptive { batch, tolerance: tol, pilot: a.adaptive_pilot })
         }
     };
     let region = match &a.cell {
@@ -195,11 +206,25 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             (a.max_depth.is_some(), "-m"),
             (a.accumulate.is_some(), "-o"),
             (a.hemisphere, "-H"),
+            (a.no_rr, "--no-rr"),
         ];
         if let Some((_, flag)) = lighting_flags.iter().find(|(used, _)| *used) {
-            crate::bail!("{flag} applies to light transport, which is not implemented yet; only --integrator normals exists");
+            crate::bail!("{flag} applies to light transport; it has no effect with --integrator normals");
         }
     }
+    let light_samples = a.light_samples.unwrap_or(1);
+    if light_samples == 0 || light_samples > 1 << 16 {
+        crate::bail!("-l {light_samples}: samples per light must be between 1 and 65536");
+    }
+    let max_depth = a.max_depth.unwrap_or(1);
+    if max_depth > 100_000 {
+        crate::bail!("-m {max_depth}: the maximum ray depth is 100000");
+    }
+    let accumulate = match a.accumulate {
+        None => true,
+        Some(v) if v == 0 || v == 1 => v == 1,
+        Some(v) => crate::bail!("-o {v}: expected 0 (only bounce m) or 1 (accumulate)"),
+    };
     let threads = init_threads(a.threads)?;
 
     let scene = load_scene(a.scene.as_deref())?;
@@ -215,9 +240,33 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         write_text_atomically(p, &camera.to_settings())?;
     }
 
+    let lights = match a.integrator {
+        IntegratorKind::Path => {
+            check_materials(&scene)?;
+            let l = Lights::from_scene(&scene)?;
+            for note in &l.notes {
+                println!("{}: {note}", scene.name);
+            }
+            if l.lights.is_empty() {
+                println!("{}: warning: the scene has no lights; the image will be black", scene.name);
+            }
+            l
+        }
+        IntegratorKind::Normals => Lights::default(),
+    };
     let built = accel::build(a.backend, &scene.shapes, threads)?;
     let integrator: Box<dyn Integrator> = match a.integrator {
         IntegratorKind::Normals => Box::new(NormalShading { scene: &scene, accel: built.accel.as_ref() }),
+        IntegratorKind::Path => Box::new(PathTracer {
+            scene: &scene,
+            accel: built.accel.as_ref(),
+            lights: &lights,
+            max_depth,
+            accumulate,
+            hemisphere: a.hemisphere,
+            light_samples,
+            russian_roulette: !a.no_rr,
+        }),
     };
     let settings = RenderSettings { width, height, spp, seed: a.seed, region, adaptive, progress: render::progress_wanted() };
     let start = Instant::now();
@@ -252,6 +301,25 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         threads,
         written.join(", ")
     );
+    Ok(())
+}
+
+/// The path integrator renders diffuse and emissive materials; anything else
+/// is refused by name rather than approximated.
+pub fn check_materials(scene: &Scene) -> Result<()> {
+    for (obj, shape) in scene.objects.iter().zip(&scene.shapes) {
+        let _ = shape;
+        let m = &scene.materials[obj.material];
+        if !matches!(m.bsdf, Bsdf::Diffuse { .. } | Bsdf::Emission { .. }) {
+            crate::bail!(
+                "{}: object '{}' uses material '{}' ({}), which the path integrator does not support yet (supported: diffuse, emission)",
+                scene.source,
+                obj.name,
+                m.name,
+                m.bsdf.kind()
+            );
+        }
+    }
     Ok(())
 }
 

@@ -8,9 +8,11 @@ pub mod cli;
 pub mod error;
 pub mod geometry;
 pub mod image_io;
+pub mod light;
 pub mod ray;
 pub mod render;
 pub mod rng;
+pub mod sampling;
 pub mod scene;
 
 pub use error::{Error, Result};

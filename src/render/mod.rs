@@ -2,6 +2,7 @@
 //! and variance of the mean, progress bar, ray counts.
 
 pub mod normals;
+pub mod path;
 
 use crate::camera::Camera;
 use crate::image_io::Rgb;
@@ -36,6 +37,9 @@ pub struct Region {
 pub struct Adaptive {
     pub batch: u32,
     pub tolerance: f32,
+    /// Decide on pilot samples that are then discarded (unbiased, costs
+    /// about twice the samples) instead of on the samples averaged (CS184).
+    pub pilot: bool,
 }
 
 #[derive(Clone, Debug)]
@@ -80,30 +84,45 @@ struct PixelResult {
     rays: u64,
 }
 
-fn render_pixel(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, x: u32, y: u32) -> PixelResult {
-    let mut rng = Rng::for_pixel(s.seed, x, y);
+/// Running per-pixel statistics over `n` samples.
+struct Moments {
+    /// Welford mean and sum of squared deviations, per channel.
+    mean: Vec3,
+    m2: Vec3,
+    n: u32,
+}
+
+/// Take up to `max` samples; with `rule`, stop early by CS184's criterion,
+/// checked every `batch` samples on the samples taken so far.
+fn sample_pixel(
+    camera: &Camera,
+    integ: &dyn Integrator,
+    s: &RenderSettings,
+    x: u32,
+    y: u32,
+    rng: &mut Rng,
+    max: u32,
+    rule: Option<Adaptive>,
+    rays: &mut u64,
+) -> Moments {
     let (w, h) = (s.width as f32, s.height as f32);
-    let mut rays = 0u64;
-    // Welford running mean and sum of squared deviations, per channel.
-    let mut mean = Vec3::ZERO;
-    let mut m2 = Vec3::ZERO;
+    let mut m = Moments { mean: Vec3::ZERO, m2: Vec3::ZERO, n: 0 };
     // Illuminance moments for the adaptive rule.
     let (mut s1, mut s2) = (0.0f64, 0.0f64);
-    let mut n = 0u32;
-    while n < s.spp {
+    while m.n < max {
         let (jx, jy) = if s.spp == 1 { (0.5, 0.5) } else { rng.uniform2() };
         let ray = camera.generate_ray((x as f32 + jx) / w, (y as f32 + jy) / h);
-        let l = integ.radiance(&ray, &mut rng, &mut rays);
-        n += 1;
-        let d = l - mean;
-        mean += d / n as f32;
-        m2 += d * (l - mean);
+        let l = integ.radiance(&ray, rng, rays);
+        m.n += 1;
+        let d = l - m.mean;
+        m.mean += d / m.n as f32;
+        m.m2 += d * (l - m.mean);
         let il = illuminance(l) as f64;
         s1 += il;
         s2 += il * il;
-        if let Some(a) = s.adaptive {
-            if n % a.batch == 0 && n >= 2 {
-                let nf = n as f64;
+        if let Some(a) = rule {
+            if m.n % a.batch == 0 {
+                let nf = m.n as f64;
                 let mu = s1 / nf;
                 let var = ((s2 - s1 * s1 / nf) / (nf - 1.0)).max(0.0);
                 if 1.96 * var.sqrt() / nf.sqrt() <= a.tolerance as f64 * mu {
@@ -112,8 +131,28 @@ fn render_pixel(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, x: 
             }
         }
     }
-    let var_of_mean = if n > 1 { m2 / (n as f32 * (n - 1) as f32) } else { Vec3::ZERO };
-    PixelResult { mean, var_of_mean, samples: n, rays }
+    m
+}
+
+/// Seed tag of the pilot streams, so pilot samples never reuse image samples.
+const PILOT_TAG: u64 = 0x7069_6c6f_7420_5f5f;
+
+fn render_pixel(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, x: u32, y: u32) -> PixelResult {
+    let mut rng = Rng::for_pixel(s.seed, x, y);
+    let mut rays = 0u64;
+    let m = match s.adaptive {
+        Some(a) if a.pilot => {
+            // Kirk and Arvo's two-stage sampling: decide the count on pilot
+            // samples, throw them away, average fresh ones. The stopping
+            // decision is then independent of the samples averaged: unbiased.
+            let mut pilot = Rng::for_pixel(s.seed ^ PILOT_TAG, x, y);
+            let n = sample_pixel(camera, integ, s, x, y, &mut pilot, s.spp, Some(a), &mut rays).n;
+            sample_pixel(camera, integ, s, x, y, &mut rng, n, None, &mut rays)
+        }
+        rule => sample_pixel(camera, integ, s, x, y, &mut rng, s.spp, rule, &mut rays),
+    };
+    let var_of_mean = if m.n > 1 { m.m2 / (m.n as f32 * (m.n - 1) as f32) } else { Vec3::ZERO };
+    PixelResult { mean: m.mean, var_of_mean, samples: m.n, rays }
 }
 
 /// Render `settings.region` (or the whole frame) with `integ`.

@@ -3,6 +3,7 @@
 
 use super::{Scene, Shape};
 use crate::accel::Hit;
+use crate::geometry::{intersect_triangle, RayTransform};
 use crate::ray::Ray;
 use glam::Vec3;
 
@@ -27,11 +28,18 @@ impl Interaction {
             Shape::Mesh(m) => {
                 let tri = m.triangles[hit.prim_id as usize];
                 let [a, b, c] = tri.map(|i| m.positions[i as usize]);
-                let w = 1.0 - hit.u - hit.v;
-                let p = a * w + b * hit.u + c * hit.v;
+                // Backends agree on *which* triangle, but Embree's barycentrics
+                // differ from ours in the last bits. Recomputing them with our
+                // own test makes shading depend only on (ray, primitive), so
+                // every backend renders the same image. If our test misses by
+                // an ulp at an edge, keep the backend's values.
+                let rt = RayTransform::new(ray.origin, ray.dir);
+                let (_, u, v) = intersect_triangle(&rt, a, b, c, ray.tmin, ray.tmax).unwrap_or((hit.t, hit.u, hit.v));
+                let w = 1.0 - u - v;
+                let p = a * w + b * u + c * v;
                 let ng = (b - a).cross(c - a).normalize_or_zero();
                 let [na, nb, nc] = tri.map(|i| m.normals[i as usize]);
-                let ns = (na * w + nb * hit.u + nc * hit.v).normalize_or_zero();
+                let ns = (na * w + nb * u + nc * v).normalize_or_zero();
                 (p, ng, if ns == Vec3::ZERO { ng } else { ns })
             }
             Shape::Sphere { center, radius } => {

@@ -1,0 +1,259 @@
+//! Emitters, one model for every integrator.
+//!
+//! * Emissive surfaces (triangle meshes and spheres with an `<emission>`
+//!   material) are lights: light sampling picks points on them, and a ray that
+//!   hits one sees its radiance. Emission is **one-sided**, on the side the
+//!   geometric normal points to (the triangle winding; outward for spheres).
+//! * A CGL `<area>` light that has a visible emissive proxy (coplanar,
+//!   overlapping, same radiance, as in every CS184 Cornell box) is merged into
+//!   it: the proxy is the one emitter.
+//! * Lights without a proxy stay as they are: point lights (the file's colour
+//!   is the intensity, falling off as 1/r^2), directional lights (colour =
+//!   irradiance), the hemisphere ("ambient") light (radiance from every
+//!   direction with y > 0, seen by rays that escape), and proxy-less
+//!   rectangular area lights (not geometry, so only light sampling sees them).
+
+use crate::error::Result;
+use crate::sampling::{offset_ray_origin, uniform_hemisphere, uniform_sphere, uniform_triangle, UNIFORM_HEMISPHERE_PDF};
+use crate::scene::{Bsdf, Interaction, LightKind, Scene, Shape};
+use glam::{Vec3, Vec4Swizzles};
+use std::f32::consts::PI;
+
+#[derive(Clone, Debug)]
+pub enum Light {
+    Point { position: Vec3, intensity: Vec3 },
+    Directional { to_light: Vec3, irradiance: Vec3 },
+    /// CS184's "ambient": uniform radiance over the upper (+y) hemisphere of directions.
+    Hemisphere { radiance: Vec3 },
+    /// A one-sided rectangle `corner + s*ex + t*ey`, s,t in [0,1], emitting towards `normal`.
+    Rect { corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3, radiance: Vec3 },
+    /// The triangles of an emissive mesh, sampled by area.
+    Mesh { geom_id: u32, cdf: Vec<f32>, area: f32, radiance: Vec3 },
+    Sphere { center: Vec3, radius: f32, radiance: Vec3 },
+}
+
+/// Where a shadow ray must reach.
+#[derive(Clone, Copy, Debug)]
+pub enum Target {
+    /// A point: the ray stops just short of it.
+    Point(Vec3),
+    /// Infinitely far in direction `wi`.
+    Infinite,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    /// Unit direction from the shading point to the light.
+    pub wi: Vec3,
+    /// Radiance (area and environment lights), or intensity/r^2 or
+    /// irradiance (delta lights) arriving along `wi`.
+    pub value: Vec3,
+    /// Solid-angle pdf of `wi`; 1 for delta lights.
+    pub pdf: f32,
+    pub target: Target,
+}
+
+impl Light {
+    pub fn is_delta(&self) -> bool {
+        matches!(self, Light::Point { .. } | Light::Directional { .. })
+    }
+
+    /// Whether rays can hit this emitter (so hemisphere sampling finds it).
+    pub fn is_visible(&self) -> bool {
+        matches!(self, Light::Mesh { .. } | Light::Sphere { .. } | Light::Hemisphere { .. })
+    }
+
+    pub fn describe(&self) -> String {
+        match self {
+            Light::Point { position, intensity } => format!("point at {position} intensity {intensity}"),
+            Light::Directional { to_light, irradiance } => format!("directional towards {to_light} irradiance {irradiance}"),
+            Light::Hemisphere { radiance } => format!("hemisphere (+y) radiance {radiance}"),
+            Light::Rect { corner, ex, ey, radiance, .. } => format!("rectangle at {corner} {}x{} radiance {radiance}", ex.length(), ey.length()),
+            Light::Mesh { geom_id, area, radiance, .. } => format!("emissive mesh {geom_id} area {area} radiance {radiance}"),
+            Light::Sphere { center, radius, radiance } => format!("emissive sphere at {center} r {radius} radiance {radiance}"),
+        }
+    }
+
+    /// Sample light arriving at `p`. `u` are two uniforms, `u_sel` a third
+    /// (triangle selection). `None` when the sample carries no light (the
+    /// back of a one-sided emitter, a degenerate configuration).
+    pub fn sample(&self, scene: &Scene, p: Vec3, u: (f32, f32), u_sel: f32) -> Option<LightSample> {
+        match self {
+            Light::Point { position, intensity } => {
+                let d = *position - p;
+                let r2 = d.length_squared();
+                (r2 > 0.0).then(|| LightSample { wi: d / r2.sqrt(), value: *intensity / r2, pdf: 1.0, target: Target::Point(*position) })
+            }
+            Light::Directional { to_light, irradiance } => Some(LightSample { wi: *to_light, value: *irradiance, pdf: 1.0, target: Target::Infinite }),
+            Light::Hemisphere { radiance } => {
+                // Uniform over the upper hemisphere: local z maps to world +y.
+                let l = uniform_hemisphere(u.0, u.1);
+                let wi = Vec3::new(l.x, l.z, -l.y);
+                Some(LightSample { wi, value: *radiance, pdf: UNIFORM_HEMISPHERE_PDF, target: Target::Infinite })
+            }
+            Light::Rect { corner, ex, ey, normal, radiance } => {
+                let area = ex.cross(*ey).length();
+                let q = *corner + *ex * u.0 + *ey * u.1;
+                area_sample(p, q, *normal, *radiance, 1.0 / area)
+            }
+            Light::Mesh { geom_id, cdf, area, radiance } => {
+                let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { return None };
+                let i = cdf.partition_point(|&c| c <= u_sel * area).min(cdf.len() - 1);
+                let [a, b, c] = m.triangles[i].map(|k| m.positions[k as usize]);
+                let (bu, bv) = uniform_triangle(u.0, u.1);
+                let q = a * (1.0 - bu - bv) + b * bu + c * bv;
+                let n = (b - a).cross(c - a).normalize_or_zero();
+                area_sample(p, q, n, *radiance, 1.0 / area)
+            }
+            Light::Sphere { center, radius, radiance } => {
+                let n = uniform_sphere(u.0, u.1);
+                let q = *center + n * *radius;
+                area_sample(p, q, n, *radiance, 1.0 / (4.0 * PI * radius * radius))
+            }
+        }
+    }
+}
+
+/// Convert an area-measure sample at `q` (normal `n`, one-sided) into a
+/// solid-angle sample seen from `p`: pdf_w = pdf_A * dist^2 / |cos_l|.
+fn area_sample(p: Vec3, q: Vec3, n: Vec3, radiance: Vec3, pdf_area: f32) -> Option<LightSample> {
+    let d = q - p;
+    let dist2 = d.length_squared();
+    if !(dist2 > 0.0) {
+        return None;
+    }
+    let wi = d / dist2.sqrt();
+    let cos_l = -n.dot(wi);
+    if !(cos_l > 0.0) {
+        return None; // the back of a one-sided emitter
+    }
+    // The shadow ray stops just short of the emitter: its end is pushed off
+    // the surface, towards the receiver, by the same ulp offset as origins.
+    Some(LightSample { wi, value: radiance, pdf: pdf_area * dist2 / cos_l, target: Target::Point(offset_ray_origin(q, n)) })
+}
+
+/// Radiance leaving the surface at `it` towards `wo` (unit, pointing away).
+pub fn emitted(scene: &Scene, it: &Interaction, wo: Vec3) -> Vec3 {
+    match scene.material_of(it.geom_id).bsdf {
+        Bsdf::Emission { radiance } if it.ng.dot(wo) > 0.0 => radiance,
+        _ => Vec3::ZERO,
+    }
+}
+
+/// The set of lights of a scene, after merging area lights into their proxies.
+#[derive(Clone, Debug, Default)]
+pub struct Lights {
+    pub lights: Vec<Light>,
+    /// One line per merge or notable decision, printed by the CLI.
+    pub notes: Vec<String>,
+}
+
+impl Lights {
+    pub fn from_scene(scene: &Scene) -> Result<Lights> {
+        let mut out = Lights::default();
+        // Emissive shapes first.
+        for (g, shape) in scene.shapes.iter().enumerate() {
+            let Bsdf::Emission { radiance } = scene.material_of(g as u32).bsdf else { continue };
+            if radiance == Vec3::ZERO {
+                continue;
+            }
+            match shape {
+                Shape::Mesh(m) => {
+                    let mut cdf = Vec::with_capacity(m.triangles.len());
+                    let mut acc = 0.0f32;
+                    for t in &m.triangles {
+                        let [a, b, c] = t.map(|k| m.positions[k as usize]);
+                        acc += 0.5 * (b - a).cross(c - a).length();
+                        cdf.push(acc);
+                    }
+                    if acc > 0.0 {
+                        out.lights.push(Light::Mesh { geom_id: g as u32, cdf, area: acc, radiance });
+                    }
+                }
+                Shape::Sphere { center, radius } => out.lights.push(Light::Sphere { center: *center, radius: *radius, radiance }),
+            }
+        }
+        for l in &scene.lights {
+            let xf = l.transform;
+            let pos = (xf * glam::Vec4::new(0.0, 0.0, 0.0, 1.0)).xyz();
+            match l.kind {
+                LightKind::Point => out.lights.push(Light::Point { position: pos, intensity: l.radiance }),
+                LightKind::Directional => {
+                    // A Blender sun shines along its local -z; the light comes
+                    // from +z. (CS184 transforms (0,0,-1) as a point instead,
+                    // translation included; see the README.)
+                    let to_light = xf.transform_vector3(Vec3::Z).normalize_or_zero();
+                    if to_light == Vec3::ZERO {
+                        crate::bail!("{}: directional light '{}' has a degenerate transform", scene.source, l.name);
+                    }
+                    out.lights.push(Light::Directional { to_light, irradiance: l.radiance });
+                }
+                LightKind::Ambient => out.lights.push(Light::Hemisphere { radiance: l.radiance }),
+                LightKind::Spot => crate::bail!("{}: spot light '{}' is not supported (CS184 leaves spot lights unimplemented)", scene.source, l.name),
+                LightKind::Area => {
+                    // CS184: centre T(0,0,0), emitting along T(0,0,-1) - centre,
+                    // spanned by T(-1,0,0) - centre and T(0,1,0) - centre.
+                    let p = |v: Vec3| (xf * v.extend(1.0)).xyz();
+                    let dir = (p(-Vec3::Z) - pos).normalize_or_zero();
+                    let dx = p(-Vec3::X) - pos;
+                    let dy = p(Vec3::Y) - pos;
+                    if dir == Vec3::ZERO || dx.cross(dy).length() == 0.0 {
+                        crate::bail!("{}: area light '{}' is degenerate", scene.source, l.name);
+                    }
+                    if let Some(msg) = find_proxy(scene, &out.lights, pos, dir, dx, dy, l.radiance, &l.name) {
+                        out.notes.push(msg);
+                        continue;
+                    }
+                    let corner = pos - 0.5 * dx - 0.5 * dy;
+                    out.lights.push(Light::Rect { corner, ex: dx, ey: dy, normal: dir, radiance: l.radiance });
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Radiance of the lights a ray escaping along `dir` sees.
+    pub fn escaped(&self, dir: Vec3) -> Vec3 {
+        self.lights
+            .iter()
+            .map(|l| match l {
+                Light::Hemisphere { radiance } if dir.y > 0.0 => *radiance,
+                _ => Vec3::ZERO,
+            })
+            .sum()
+    }
+}
+
+/// An emissive mesh light that stands for the CGL area light at `pos`: all its
+/// vertices in the light's plane, its centroid inside the rectangle, emitting
+/// to the same side with the same radiance.
+#[allow(clippy::too_many_arguments)]
+fn find_proxy(scene: &Scene, lights: &[Light], pos: Vec3, dir: Vec3, dx: Vec3, dy: Vec3, radiance: Vec3, name: &str) -> Option<String> {
+    let size = dx.length().max(dy.length());
+    for l in lights {
+        let Light::Mesh { geom_id, area, radiance: r, .. } = l else { continue };
+        if (*r - radiance).abs().max_element() > 1e-4 * radiance.abs().max_element().max(1e-6) {
+            continue;
+        }
+        let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { continue };
+        let used: Vec<Vec3> = m.triangles.iter().flatten().map(|&k| m.positions[k as usize]).collect();
+        let coplanar = used.iter().all(|q| (*q - pos).dot(dir).abs() <= 1e-3 * size);
+        let centroid = used.iter().copied().sum::<Vec3>() / used.len() as f32;
+        let c = centroid - pos;
+        let inside = c.dot(dx).abs() <= 0.5 * dx.length_squared() * (1.0 + 1e-3) && c.dot(dy).abs() <= 0.5 * dy.length_squared() * (1.0 + 1e-3);
+        // Same side: the proxy's triangles face along the light's direction.
+        let facing = m.triangles.iter().all(|t| {
+            let [a, b, c] = t.map(|k| m.positions[k as usize]);
+            (b - a).cross(c - a).dot(dir) > 0.0
+        });
+        if coplanar && inside && facing {
+            let obj = &scene.objects[*geom_id as usize].name;
+            return Some(format!(
+                "merged area light '{name}' ({:.3}x{:.3}, radiance {radiance}) into its visible emissive mesh '{obj}' (coplanar, overlapping, same radiance; area {area:.3})",
+                dx.length(),
+                dy.length()
+            ));
+        }
+    }
+    None
+}
