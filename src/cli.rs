@@ -105,6 +105,9 @@ pub struct RenderArgs {
     pub write_camera: Option<PathBuf>,
 }
 
+const DEMO_SPP: u32 = 16;
+const DEMO_DEPTH: u32 = 5;
+
 /// Entry point for the binary: one line on error, non-zero exit, no panic.
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -121,8 +124,18 @@ pub fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    let no_arguments = std::env::args_os().len() == 1;
     let result = match cli.command {
         Some(Command::Bench(b)) => crate::bench::run(&b),
+        None if no_arguments => {
+            // The demo render: CS184's defaults (1 spp, direct light only)
+            // would give a noisy, flat picture of the built-in scene.
+            println!("no arguments: rendering the built-in scene with -s {DEMO_SPP} -m {DEMO_DEPTH}");
+            let mut r = cli.render;
+            r.spp = Some(DEMO_SPP);
+            r.max_depth = Some(DEMO_DEPTH);
+            run_render(&r)
+        }
         None => run_render(&cli.render),
     };
     match result {

@@ -14,8 +14,8 @@
 //!   rectangular area lights (not geometry, so only light sampling sees them).
 
 use crate::error::Result;
-use crate::sampling::{offset_ray_origin, uniform_hemisphere, uniform_sphere, uniform_triangle, UNIFORM_HEMISPHERE_PDF};
-use crate::scene::{Bsdf, Interaction, LightKind, Scene, Shape};
+use crate::sampling::{magnitude, offset_ray_origin, uniform_hemisphere, uniform_sphere, uniform_triangle, UNIFORM_HEMISPHERE_PDF};
+use crate::scene::{Interaction, LightKind, Scene, Shape};
 use glam::{Vec3, Vec4Swizzles};
 use std::f32::consts::PI;
 
@@ -74,6 +74,32 @@ impl Light {
         }
     }
 
+    /// Solid-angle pdf with which `sample` from `p` picks the point `x` (normal
+    /// `n`) of this emitter's surface; 0 for lights that are not surfaces.
+    pub fn pdf_hit(&self, p: Vec3, x: Vec3, n: Vec3) -> f32 {
+        let pdf_area = match self {
+            Light::Mesh { area, .. } => 1.0 / area,
+            Light::Sphere { radius, .. } => 1.0 / (4.0 * PI * radius * radius),
+            _ => return 0.0,
+        };
+        let d = x - p;
+        let dist2 = d.length_squared();
+        let cos = n.dot(d).abs() / dist2.sqrt();
+        if cos > 0.0 {
+            pdf_area * dist2 / cos
+        } else {
+            0.0
+        }
+    }
+
+    /// Solid-angle pdf of `sample` for an escaping direction (hemisphere light).
+    pub fn pdf_escape(&self, dir: Vec3) -> f32 {
+        match self {
+            Light::Hemisphere { .. } if dir.y > 0.0 => UNIFORM_HEMISPHERE_PDF,
+            _ => 0.0,
+        }
+    }
+
     /// Sample light arriving at `p`. `u` are two uniforms, `u_sel` a third
     /// (triangle selection). `None` when the sample carries no light (the
     /// back of a one-sided emitter, a degenerate configuration).
@@ -94,7 +120,7 @@ impl Light {
             Light::Rect { corner, ex, ey, normal, radiance } => {
                 let area = ex.cross(*ey).length();
                 let q = *corner + *ex * u.0 + *ey * u.1;
-                area_sample(p, q, *normal, *radiance, 1.0 / area)
+                area_sample(p, q, *normal, magnitude(&[*corner, *corner + *ex + *ey, *corner + *ex, *corner + *ey]), *radiance, 1.0 / area)
             }
             Light::Mesh { geom_id, cdf, area, radiance } => {
                 let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { return None };
@@ -103,12 +129,12 @@ impl Light {
                 let (bu, bv) = uniform_triangle(u.0, u.1);
                 let q = a * (1.0 - bu - bv) + b * bu + c * bv;
                 let n = (b - a).cross(c - a).normalize_or_zero();
-                area_sample(p, q, n, *radiance, 1.0 / area)
+                area_sample(p, q, n, magnitude(&[a, b, c]), *radiance, 1.0 / area)
             }
             Light::Sphere { center, radius, radiance } => {
                 let n = uniform_sphere(u.0, u.1);
                 let q = *center + n * *radius;
-                area_sample(p, q, n, *radiance, 1.0 / (4.0 * PI * radius * radius))
+                area_sample(p, q, n, center.abs().max_element() + radius, *radiance, 1.0 / (4.0 * PI * radius * radius))
             }
         }
     }
@@ -116,7 +142,7 @@ impl Light {
 
 /// Convert an area-measure sample at `q` (normal `n`, one-sided) into a
 /// solid-angle sample seen from `p`: pdf_w = pdf_A * dist^2 / |cos_l|.
-fn area_sample(p: Vec3, q: Vec3, n: Vec3, radiance: Vec3, pdf_area: f32) -> Option<LightSample> {
+fn area_sample(p: Vec3, q: Vec3, n: Vec3, mag: f32, radiance: Vec3, pdf_area: f32) -> Option<LightSample> {
     let d = q - p;
     let dist2 = d.length_squared();
     if !(dist2 > 0.0) {
@@ -129,14 +155,15 @@ fn area_sample(p: Vec3, q: Vec3, n: Vec3, radiance: Vec3, pdf_area: f32) -> Opti
     }
     // The shadow ray stops just short of the emitter: its end is pushed off
     // the surface, towards the receiver, by the same ulp offset as origins.
-    Some(LightSample { wi, value: radiance, pdf: pdf_area * dist2 / cos_l, target: Target::Point(offset_ray_origin(q, n)) })
+    Some(LightSample { wi, value: radiance, pdf: pdf_area * dist2 / cos_l, target: Target::Point(offset_ray_origin(q, n, mag)) })
 }
 
 /// Radiance leaving the surface at `it` towards `wo` (unit, pointing away).
 pub fn emitted(scene: &Scene, it: &Interaction, wo: Vec3) -> Vec3 {
-    match scene.material_of(it.geom_id).bsdf {
-        Bsdf::Emission { radiance } if it.ng.dot(wo) > 0.0 => radiance,
-        _ => Vec3::ZERO,
+    if it.ng.dot(wo) > 0.0 {
+        scene.material_of(it.geom_id).emission
+    } else {
+        Vec3::ZERO
     }
 }
 
@@ -144,16 +171,18 @@ pub fn emitted(scene: &Scene, it: &Interaction, wo: Vec3) -> Vec3 {
 #[derive(Clone, Debug, Default)]
 pub struct Lights {
     pub lights: Vec<Light>,
+    /// For each shape (geometry id), the index of the light it is, if emissive.
+    pub of_geometry: Vec<Option<usize>>,
     /// One line per merge or notable decision, printed by the CLI.
     pub notes: Vec<String>,
 }
 
 impl Lights {
     pub fn from_scene(scene: &Scene) -> Result<Lights> {
-        let mut out = Lights::default();
+        let mut out = Lights { of_geometry: vec![None; scene.shapes.len()], ..Lights::default() };
         // Emissive shapes first.
         for (g, shape) in scene.shapes.iter().enumerate() {
-            let Bsdf::Emission { radiance } = scene.material_of(g as u32).bsdf else { continue };
+            let radiance = scene.material_of(g as u32).emission;
             if radiance == Vec3::ZERO {
                 continue;
             }
@@ -167,10 +196,14 @@ impl Lights {
                         cdf.push(acc);
                     }
                     if acc > 0.0 {
+                        out.of_geometry[g] = Some(out.lights.len());
                         out.lights.push(Light::Mesh { geom_id: g as u32, cdf, area: acc, radiance });
                     }
                 }
-                Shape::Sphere { center, radius } => out.lights.push(Light::Sphere { center: *center, radius: *radius, radiance }),
+                Shape::Sphere { center, radius } => {
+                    out.of_geometry[g] = Some(out.lights.len());
+                    out.lights.push(Light::Sphere { center: *center, radius: *radius, radiance });
+                }
             }
         }
         for l in &scene.lights {

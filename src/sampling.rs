@@ -69,23 +69,33 @@ impl Frame {
     }
 }
 
-/// Wächter and Binder, Ray Tracing Gems ch. 6: move `p` off its surface along
-/// `n` (the geometric normal, on the side the new ray leaves to) by a fixed
-/// number of float ulps, or by a tiny absolute step near the origin where
-/// ulps are too small. No scene-dependent epsilon.
-pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
-    const ORIGIN: f32 = 1.0 / 32.0;
-    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-    const INT_SCALE: f32 = 256.0;
-    let step = |x: f32, nx: f32| -> f32 {
-        if x.abs() < ORIGIN {
-            return x + FLOAT_SCALE * nx;
-        }
-        let of = (INT_SCALE * nx) as i32;
-        let bits = x.to_bits() as i32;
-        f32::from_bits((bits + if x < 0.0 { -of } else { of }) as u32)
+/// How far, in ulps, a spawned ray starts off its surface.
+pub const OFFSET_ULPS: f32 = 32.0;
+
+/// Move `p` off its surface along the unit geometric normal `n` (on the side
+/// the new ray leaves to) by `OFFSET_ULPS` ulps of `magnitude`, the largest
+/// coordinate magnitude of the primitive `p` lies on.
+///
+/// This is Wächter and Binder's integer-ulp offset (Ray Tracing Gems ch. 6)
+/// with one change: they count ulps of `p` itself and switch to a fixed
+/// 1/65536 step near the origin, which is far too large for a millimetre-sized
+/// scene and too small for a huge triangle passing near the origin. Both the
+/// error of our hit point (interpolated from the vertices) and the error of
+/// re-intersecting the same primitive scale with the primitive's coordinates,
+/// so we count ulps of those. No scene-dependent epsilon either way.
+pub fn offset_ray_origin(p: Vec3, n: Vec3, magnitude: f32) -> Vec3 {
+    let ulp = |x: f32| {
+        let x = x.abs().max(f32::MIN_POSITIVE);
+        f32::from_bits(x.to_bits() + 1) - x
     };
-    Vec3::new(step(p.x, n.x), step(p.y, n.y), step(p.z, n.z))
+    // Where a component of n is tiny its part of the step may round away;
+    // the step along n itself is what keeps the ray off the surface.
+    p + n * (OFFSET_ULPS * ulp(magnitude.max(p.abs().max_element())))
+}
+
+/// The largest coordinate magnitude of a set of points.
+pub fn magnitude(points: &[Vec3]) -> f32 {
+    points.iter().fold(0.0f32, |m, p| m.max(p.abs().max_element()))
 }
 
 #[cfg(test)]
@@ -104,12 +114,16 @@ mod tests {
     }
 
     #[test]
-    fn offset_moves_to_the_normal_side() {
-        for p in [Vec3::new(1e5, -3.0, 0.01), Vec3::new(-2.0, 7.5e3, -1e-4)] {
+    fn offset_moves_to_the_normal_side_by_ulps_of_the_primitive() {
+        for p in [Vec3::new(1e5, -3.0, 0.01), Vec3::new(-2.0, 7.5e3, -1e-4), Vec3::new(1e-3, 2e-3, 0.0)] {
             let n = Vec3::new(0.0, 0.0, 1.0);
-            let q = offset_ray_origin(p, n);
-            assert!(q.z > p.z && q.x == p.x && q.y == p.y);
-            let q = offset_ray_origin(p, -n);
+            let m = p.abs().max_element();
+            let q = offset_ray_origin(p, n, m);
+            assert!(q.z > p.z && q.x == p.x && q.y == p.y, "{p} -> {q}");
+            // 32 ulps of the magnitude, give or take rounding of the sum.
+            let ulp = f32::from_bits(m.to_bits() + 1) - m;
+            assert!((q.z - p.z) >= 16.0 * ulp && (q.z - p.z) <= 64.0 * ulp, "{p}: moved {}", q.z - p.z);
+            let q = offset_ray_origin(p, -n, m);
             assert!(q.z < p.z);
         }
     }

@@ -29,6 +29,7 @@ fn no_arguments_renders_the_builtin_scene_into_the_current_directory() {
     let d = scratch("default");
     let out = run(&d, &[]);
     let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("merged area light 'Area'"), "{stdout}");
     let png = d.join("CBspheres_lambertian.png");
     assert!(png.exists(), "no image written; stdout: {stdout}");
     assert!(stdout.contains("wrote CBspheres_lambertian.png"), "{stdout}");
@@ -56,8 +57,8 @@ fn cow_normals_are_identical_with_and_without_the_bvh() {
     let d = scratch("cow");
     let cow = common::scene_path("meshedit", "cow");
     let cow = cow.to_str().unwrap();
-    let native = render_exr(&d, "native", &["-r", "480", "360", "--backend", "native", cow]);
-    let brute = render_exr(&d, "brute", &["-r", "480", "360", "--backend", "brute", cow]);
+    let native = render_exr(&d, "native", &["--integrator", "normals", "-r", "480", "360", "--backend", "native", cow]);
+    let brute = render_exr(&d, "brute", &["--integrator", "normals", "-r", "480", "360", "--backend", "brute", cow]);
     assert_eq!((native.width, native.height), (480, 360));
     let lit = native.pixels.iter().filter(|p| p.length() > 0.0).count();
     assert!(lit > 20_000, "cow covers only {lit} pixels");
@@ -103,10 +104,22 @@ fn camera_settings_round_trip_through_a_file() {
 }
 
 #[test]
-fn lighting_flags_are_refused_until_light_transport_exists() {
-    let d = scratch("later");
-    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).args(["-m", "3"]).current_dir(&d).output().unwrap();
+fn lighting_flags_are_refused_with_normal_shading() {
+    let d = scratch("normals-flags");
+    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).args(["--integrator", "normals", "-m", "3"]).current_dir(&d).output().unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("-m") && err.contains("not implemented"), "{err}");
+    assert!(err.contains("-m") && err.contains("no effect"), "{err}");
+}
+
+#[test]
+fn unsupported_materials_are_refused_by_name() {
+    let d = scratch("mirror");
+    let scene = common::scene_path("sky", "CBspheres");
+    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).arg(&scene).args(["-r", "8", "8"]).current_dir(&d).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("mirror") || err.contains("glass"), "{err}");
+    assert!(err.contains("CBspheres.dae") && err.trim_end().lines().count() == 1, "{err}");
+    assert!(std::fs::read_dir(&d).unwrap().next().is_none(), "output written");
 }

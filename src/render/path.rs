@@ -1,11 +1,17 @@
 //! Light transport: CS184's structure (zero bounce, one bounce, at least one
 //! bounce) made physically correct, written as a loop.
 //!
-//! Emission is counted where a camera ray lands, and otherwise only through
-//! the direct-lighting estimate at each vertex: light sampling (default) or
-//! uniform hemisphere sampling (`-H`). A continuation ray that happens to hit
-//! an emitter adds nothing, because the direct estimate at the previous vertex
-//! already accounted for that light: no double counting.
+//! Emission is counted where a camera ray lands, and otherwise as direct
+//! light at each vertex, estimated one of two ways:
+//!
+//! * default: light sampling combined with the BSDF sample that continues the
+//!   path, by multiple importance sampling (Veach's power heuristic, counting
+//!   `-l` samples per light). Light sampling alone has unbounded variance
+//!   where surfaces meet at an emitter (the 1/r^2 of points sampled next to
+//!   the receiver); the BSDF sample covers that region. Each emitter hit is
+//!   counted once, with its MIS weight: no double counting.
+//! * `-H`: CS184's uniform hemisphere estimate, on its own rays; the
+//!   continuation ray then adds nothing where it lands.
 //!
 //! Delta lights (point, directional) and proxy-less rectangle lights cannot be
 //! hit by a ray, so `-H` still samples them explicitly; everything a ray can
@@ -17,7 +23,7 @@ use crate::accel::Traversal;
 use crate::light::{emitted, Light, Lights, Target};
 use crate::ray::Ray;
 use crate::rng::Rng;
-use crate::sampling::{cosine_hemisphere, offset_ray_origin, uniform_hemisphere, Frame, UNIFORM_HEMISPHERE_PDF};
+use crate::sampling::{cosine_hemisphere, cosine_hemisphere_pdf, uniform_hemisphere, Frame, UNIFORM_HEMISPHERE_PDF};
 use crate::scene::{Bsdf, Interaction, Scene};
 use glam::Vec3;
 use std::f32::consts::PI;
@@ -67,26 +73,21 @@ impl PathTracer<'_> {
         Vertex { it, ng, ns, albedo }
     }
 
-    /// A ray leaving `v` along `wi`, its origin moved off the surface.
-    fn spawn(v: &Vertex, wi: Vec3) -> Ray {
-        let n = if wi.dot(v.ng) >= 0.0 { v.ng } else { -v.ng };
-        Ray::new(offset_ray_origin(v.it.p, n), wi)
-    }
-
     fn unoccluded(&self, v: &Vertex, wi: Vec3, target: Target, rays: &mut u64) -> bool {
         *rays += 1;
-        let origin = offset_ray_origin(v.it.p, v.ng);
         let ray = match target {
-            // Half-open range (0, 1]: the segment ends at the (offset) target.
-            Target::Point(q) => Ray::with_range(origin, q - origin, 0.0, 1.0),
-            Target::Infinite => Ray::new(origin, wi),
+            Target::Point(q) => v.it.spawn_ray_to(q),
+            Target::Infinite => v.it.spawn_ray(wi),
         };
         !self.accel.occluded(&ray)
     }
 
-    /// Light sampling for one light: `n` samples averaged.
+    /// Light sampling for one light: `n` samples averaged, each weighted
+    /// against the BSDF sample by the power heuristic (delta lights and
+    /// lights no ray can hit have weight 1: only light sampling finds them).
     fn sample_light(&self, v: &Vertex, light: &Light, n: u32, rng: &mut Rng, rays: &mut u64) -> Vec3 {
         let f = v.albedo / PI;
+        let mis = !self.hemisphere && light.is_visible();
         let mut sum = Vec3::ZERO;
         for _ in 0..n {
             let u = rng.uniform2();
@@ -97,10 +98,29 @@ impl PathTracer<'_> {
                 continue;
             }
             if self.unoccluded(v, s.wi, s.target, rays) {
-                sum += f * s.value * cos / s.pdf;
+                let w = if mis { power_heuristic(n as f32 * s.pdf, cosine_hemisphere_pdf(cos)) } else { 1.0 };
+                sum += f * s.value * cos / s.pdf * w;
             }
         }
         sum / n as f32
+    }
+
+    /// MIS weight of the BSDF sample `wi` (pdf `pdf_b`) that reached the
+    /// emitter surface at `hit`, seen from `v`.
+    fn bsdf_weight_hit(&self, v: &Vertex, hit: &Interaction, pdf_b: f32) -> f32 {
+        match self.lights.of_geometry[hit.geom_id as usize] {
+            Some(k) => {
+                let pl = self.lights.lights[k].pdf_hit(v.it.p, hit.p, hit.ng);
+                power_heuristic(pdf_b, self.light_samples as f32 * pl)
+            }
+            None => 1.0,
+        }
+    }
+
+    /// MIS weight of a BSDF sample that escaped along `wi`.
+    fn bsdf_weight_escape(&self, wi: Vec3, pdf_b: f32) -> f32 {
+        let pl: f32 = self.lights.lights.iter().map(|l| l.pdf_escape(wi)).sum();
+        power_heuristic(pdf_b, self.light_samples as f32 * pl)
     }
 
     /// Direct light reflected at `v` towards the previous vertex.
@@ -134,7 +154,7 @@ impl PathTracer<'_> {
                 continue;
             }
             let cos = wi.dot(v.ns);
-            let ray = Self::spawn(v, wi);
+            let ray = v.it.spawn_ray(wi);
             let le = match self.trace(&ray, rays) {
                 Some(hit) => emitted(self.scene, &hit, -wi),
                 None => self.lights.escaped(wi),
@@ -161,36 +181,70 @@ impl Integrator for PathTracer<'_> {
         let mut beta = Vec3::ONE;
         let mut bounce = 1;
         loop {
-            if counts(bounce) {
+            let count = counts(bounce);
+            if count {
                 l += beta * self.direct(&v, rng, rays);
             }
-            if bounce == m || v.albedo == Vec3::ZERO {
+            let last = bounce == m;
+            // With MIS the last vertex still needs its BSDF sample: the light
+            // it finds is part of this bounce's direct light.
+            if v.albedo == Vec3::ZERO || (last && (self.hemisphere || !count)) {
                 break;
             }
             // Diffuse BSDF, cosine-weighted: f cos / pdf = albedo.
             let (u1, u2) = rng.uniform2();
             let wi = Frame::new(v.ns).to_world(cosine_hemisphere(u1, u2));
-            if wi.dot(v.ng) <= 0.0 {
+            let pdf_b = cosine_hemisphere_pdf(wi.dot(v.ns));
+            if wi.dot(v.ng) <= 0.0 || pdf_b <= 0.0 {
                 break; // below the geometric surface: no light goes that way
             }
-            beta *= v.albedo;
+            let mut beta_next = beta * v.albedo;
             // Russian roulette, from the second indirect bounce on (CS184 always
             // traces one). Continuing with probability max(beta) keeps the
             // weights of surviving paths near 1, so dark paths, which would add
             // little, are the ones cut, and no path's weight can blow up as it
             // can with a constant probability.
-            if self.russian_roulette && bounce >= 2 {
-                let q = beta.max_element().min(1.0);
+            if self.russian_roulette && bounce >= 2 && !last {
+                let q = beta_next.max_element().min(1.0);
                 if q <= 0.0 || rng.uniform() >= q {
                     break;
                 }
-                beta /= q;
+                beta_next /= q;
             }
-            let ray = Self::spawn(&v, wi);
-            let Some(next) = self.trace(&ray, rays) else { break };
+            let ray = v.it.spawn_ray(wi);
+            let gather = count && !self.hemisphere;
+            let Some(next) = self.trace(&ray, rays) else {
+                if gather {
+                    l += beta_next * self.lights.escaped(wi) * self.bsdf_weight_escape(wi, pdf_b);
+                }
+                break;
+            };
+            if gather {
+                let le = emitted(self.scene, &next, -wi);
+                if le != Vec3::ZERO {
+                    l += beta_next * le * self.bsdf_weight_hit(&v, &next, pdf_b);
+                }
+            }
+            if last {
+                break;
+            }
             v = self.vertex(next, -wi);
+            beta = beta_next;
             bounce += 1;
         }
         l
+    }
+}
+
+/// Veach's power heuristic (beta = 2) for a sample of pdf `a` against `b`,
+/// both already multiplied by their strategies' sample counts.
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 && (a2 + b2).is_finite() {
+        a2 / (a2 + b2)
+    } else if a.is_infinite() {
+        1.0
+    } else {
+        0.0
     }
 }

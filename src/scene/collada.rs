@@ -434,7 +434,11 @@ impl<'a, 'i> Loader<'a, 'i> {
                 crate::bail!("{what}: diffuse albedo {albedo} is outside [0, 1]");
             }
         }
-        Ok(Material { name: id.to_string(), bsdf })
+        let emission = if let Bsdf::Emission { radiance } = bsdf { radiance } else { Vec3::ZERO };
+        if !(emission.min_element() >= 0.0) {
+            crate::bail!("{what}: negative emission {emission}");
+        }
+        Ok(Material { name: id.to_string(), bsdf, emission })
     }
 
     fn light(&self, inst: Node, xf: Mat4, node_name: &str) -> Result<LightDesc> {

@@ -4,6 +4,7 @@
 use super::{Scene, Shape};
 use crate::accel::Hit;
 use crate::geometry::{intersect_triangle, RayTransform};
+use crate::sampling::{magnitude, offset_ray_origin};
 use crate::ray::Ray;
 use glam::Vec3;
 
@@ -18,13 +19,16 @@ pub struct Interaction {
     /// Unit shading normal: interpolated vertex normals, or `ng`.
     pub ns: Vec3,
     pub t: f32,
+    /// Largest coordinate magnitude of the primitive hit: the scale of the
+    /// hit point's rounding error, which spawned rays step over.
+    pub magnitude: f32,
     pub geom_id: u32,
     pub prim_id: u32,
 }
 
 impl Interaction {
     pub fn new(scene: &Scene, ray: &Ray, hit: &Hit) -> Self {
-        let (p, ng, ns) = match &scene.shapes[hit.geom_id as usize] {
+        let (p, ng, ns, magnitude) = match &scene.shapes[hit.geom_id as usize] {
             Shape::Mesh(m) => {
                 let tri = m.triangles[hit.prim_id as usize];
                 let [a, b, c] = tri.map(|i| m.positions[i as usize]);
@@ -40,13 +44,30 @@ impl Interaction {
                 let ng = (b - a).cross(c - a).normalize_or_zero();
                 let [na, nb, nc] = tri.map(|i| m.normals[i as usize]);
                 let ns = (na * w + nb * u + nc * v).normalize_or_zero();
-                (p, ng, if ns == Vec3::ZERO { ng } else { ns })
+                (p, ng, if ns == Vec3::ZERO { ng } else { ns }, magnitude(&[a, b, c]))
             }
             Shape::Sphere { center, radius } => {
                 let n = (ray.at(hit.t) - *center).normalize_or_zero();
-                (*center + n * *radius, n, n)
+                (*center + n * *radius, n, n, center.abs().max_element() + radius)
             }
         };
-        Interaction { p, ng, ns, t: hit.t, geom_id: hit.geom_id, prim_id: hit.prim_id }
+        Interaction { p, ng, ns, t: hit.t, magnitude, geom_id: hit.geom_id, prim_id: hit.prim_id }
+    }
+}
+
+impl Interaction {
+    /// A ray leaving the surface along `wi`, its origin stepped off the
+    /// surface to the side `wi` goes (see `offset_ray_origin`).
+    pub fn spawn_ray(&self, wi: Vec3) -> Ray {
+        let n = if wi.dot(self.ng) >= 0.0 { self.ng } else { -self.ng };
+        Ray::new(offset_ray_origin(self.p, n, self.magnitude), wi)
+    }
+
+    /// A segment from the surface to `target` (already stepped off its own
+    /// surface): the half-open range (0, 1] ends exactly at the target.
+    pub fn spawn_ray_to(&self, target: Vec3) -> Ray {
+        let n = if (target - self.p).dot(self.ng) >= 0.0 { self.ng } else { -self.ng };
+        let o = offset_ray_origin(self.p, n, self.magnitude);
+        Ray::with_range(o, target - o, 0.0, 1.0)
     }
 }

@@ -33,11 +33,15 @@ pub struct Material {
     /// The COLLADA material id (or `default` for CS184's diffuse 0.5).
     pub name: String,
     pub bsdf: Bsdf,
+    /// Radiance emitted (one-sided, see `light`). CS184 files only give it to
+    /// `<emission>` materials, which do not reflect; scenes built in code may
+    /// give it to a diffuse surface too (the closed-form furnace tests do).
+    pub emission: Vec3,
 }
 
 impl Material {
     /// CS184 gives objects with no material, or no diffuse colour, diffuse 0.5.
     pub fn default_diffuse() -> Self {
-        Material { name: "default".into(), bsdf: Bsdf::Diffuse { albedo: Vec3::splat(0.5) } }
+        Material { name: "default".into(), bsdf: Bsdf::Diffuse { albedo: Vec3::splat(0.5) }, emission: Vec3::ZERO }
     }
 }

@@ -1,0 +1,469 @@
+//! Light transport, tested against closed forms and against itself, with
+//! fixed seeds and thresholds from the estimators' own standard errors.
+//!
+//! Every statistical test in a function shares a family-wise alpha of 0.01,
+//! split by Šidák; every "no difference" test also checks its own power
+//! (its standard error must be small enough to see a 1-2 % error).
+
+mod common;
+
+use glam::{Mat3, Vec3};
+use pathtracer::accel::BackendKind;
+use pathtracer::camera::Camera;
+use pathtracer::light::{Light, Lights};
+use pathtracer::render::{self, path::PathTracer, RenderSettings};
+use pathtracer::rng::Rng;
+use pathtracer::sampling::{cosine_hemisphere, cosine_hemisphere_pdf, uniform_hemisphere, UNIFORM_HEMISPHERE_PDF};
+use pathtracer::scene::{Bsdf, CameraDesc, LightDesc, LightKind, Material, Object, Scene, Shape, TriangleMesh};
+use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
+use std::f32::consts::PI;
+
+/// Two-sided critical z for family-wise `alpha` over `m` tests (Šidák).
+fn z_crit(alpha: f64, m: usize) -> f64 {
+    let a = 1.0 - (1.0 - alpha).powf(1.0 / m as f64);
+    Normal::new(0.0, 1.0).unwrap().inverse_cdf(1.0 - a / 2.0)
+}
+
+fn sidak(alpha: f64, m: usize) -> f64 {
+    1.0 - (1.0 - alpha).powf(1.0 / m as f64)
+}
+
+// ---------------------------------------------------------------- samplers
+
+/// Pearson chi-square p-value of `counts` against `expected`, pooling cells
+/// with expected count below 5 (Mitsuba/pbrt practice).
+fn chi2_p(counts: &[f64], expected: &[f64]) -> f64 {
+    let (mut chi2, mut dof) = (0.0, 0usize);
+    let (mut pool_c, mut pool_e) = (0.0, 0.0);
+    for (&c, &e) in counts.iter().zip(expected) {
+        assert!(e > 0.0 || c == 0.0, "samples in a zero-pdf cell");
+        if e < 5.0 {
+            pool_c += c;
+            pool_e += e;
+            continue;
+        }
+        chi2 += (c - e) * (c - e) / e;
+        dof += 1;
+    }
+    if pool_e >= 5.0 {
+        chi2 += (pool_c - pool_e) * (pool_c - pool_e) / pool_e;
+        dof += 1;
+    }
+    1.0 - ChiSquared::new((dof - 1) as f64).unwrap().cdf(chi2)
+}
+
+/// Bin directions on the +z hemisphere over a (cos theta, phi) grid.
+fn hemisphere_counts(n: usize, rows: usize, cols: usize, mut sample: impl FnMut(f32, f32) -> Vec3) -> Vec<f64> {
+    let mut rng = Rng::new(2024, 1);
+    let mut counts = vec![0.0; rows * cols];
+    for _ in 0..n {
+        let (u1, u2) = rng.uniform2();
+        let w = sample(u1, u2);
+        assert!((w.length() - 1.0).abs() < 1e-5 && w.z >= 0.0, "bad direction {w}");
+        let r = ((w.z * rows as f32) as usize).min(rows - 1);
+        let phi = w.y.atan2(w.x).rem_euclid(2.0 * PI);
+        let c = ((phi / (2.0 * PI) * cols as f32) as usize).min(cols - 1);
+        counts[r * cols + c] += 1.0;
+    }
+    counts
+}
+
+#[test]
+fn sampling_routines_pass_chi_square_and_their_pdfs_integrate_to_one() {
+    let alpha = sidak(0.01, 3);
+    let (n, rows, cols) = (1_000_000usize, 10, 20);
+    let dphi = 2.0 * std::f64::consts::PI / cols as f64;
+
+    // Uniform hemisphere: each cell has measure dcos * dphi.
+    let counts = hemisphere_counts(n, rows, cols, uniform_hemisphere);
+    let expected: Vec<f64> = (0..rows * cols).map(|_| n as f64 * (1.0 / rows as f64) * dphi * UNIFORM_HEMISPHERE_PDF as f64).collect();
+    let p = chi2_p(&counts, &expected);
+    assert!(p > alpha, "uniform hemisphere: chi-square p = {p}");
+
+    // Cosine hemisphere: integral of cos/pi over a cell = dphi/(2 pi) * (c1^2 - c0^2).
+    let counts = hemisphere_counts(n, rows, cols, cosine_hemisphere);
+    let expected: Vec<f64> = (0..rows * cols)
+        .map(|i| {
+            let r = i / cols;
+            let (c0, c1) = (r as f64 / rows as f64, (r + 1) as f64 / rows as f64);
+            n as f64 * dphi / (2.0 * std::f64::consts::PI) * (c1 * c1 - c0 * c0)
+        })
+        .collect();
+    let p = chi2_p(&counts, &expected);
+    assert!(p > alpha, "cosine hemisphere: chi-square p = {p}");
+
+    // Area light (the CB light quad): sampled points, found back by casting the
+    // sampled direction onto the light's plane, must be uniform over its area.
+    let scene = pathtracer::scene::builtin::load().unwrap();
+    let lights = Lights::from_scene(&scene).unwrap();
+    let quad = lights.lights.iter().find(|l| matches!(l, Light::Mesh { .. })).expect("the light quad is a light");
+    let (lo, hi) = light_quad_bounds(&scene, quad);
+    let shading_point = Vec3::new(0.3, 0.4, -0.2);
+    let (gx, gz) = (16usize, 12usize);
+    let mut counts = vec![0.0; gx * gz];
+    let mut rng = Rng::new(99, 3);
+    for _ in 0..n {
+        let u = rng.uniform2();
+        let s = quad.sample(&scene, shading_point, u, rng.uniform()).expect("the quad faces the point");
+        let t = (lo.y - shading_point.y) / s.wi.y;
+        let q = shading_point + s.wi * t;
+        let ix = (((q.x - lo.x) / (hi.x - lo.x) * gx as f32) as usize).min(gx - 1);
+        let iz = (((q.z - lo.z) / (hi.z - lo.z) * gz as f32) as usize).min(gz - 1);
+        counts[iz * gx + ix] += 1.0;
+    }
+    let expected = vec![n as f64 / (gx * gz) as f64; gx * gz];
+    let p = chi2_p(&counts, &expected);
+    assert!(p > alpha, "area light: chi-square p = {p}");
+
+    // Pdfs integrate to one: midpoint rule over (cos theta, phi), 512^2.
+    let k = 512;
+    let (mut uni, mut cos) = (0.0f64, 0.0f64);
+    for i in 0..k {
+        let c = (i as f64 + 0.5) / k as f64;
+        let cell = (1.0 / k as f64) * (2.0 * std::f64::consts::PI / k as f64);
+        for _ in 0..k {
+            uni += UNIFORM_HEMISPHERE_PDF as f64 * cell;
+            cos += cosine_hemisphere_pdf(c as f32) as f64 * cell;
+        }
+    }
+    assert!((uni - 1.0).abs() < 1e-4 && (cos - 1.0).abs() < 1e-4, "uniform {uni}, cosine {cos}");
+}
+
+/// The axis-aligned extent of the CB light quad (flat in y).
+fn light_quad_bounds(scene: &Scene, light: &Light) -> (Vec3, Vec3) {
+    let Light::Mesh { geom_id, .. } = light else { panic!("not a mesh light") };
+    let b = scene.shapes[*geom_id as usize].bounds();
+    assert!((b.max.y - b.min.y).abs() < 1e-5, "the light quad is not flat in y");
+    (b.min, b.max)
+}
+
+/// Solid angle of triangle abc seen from the origin (Van Oosterom & Strackee).
+fn triangle_solid_angle(a: glam::DVec3, b: glam::DVec3, c: glam::DVec3) -> f64 {
+    let (la, lb, lc) = (a.length(), b.length(), c.length());
+    let num = a.dot(b.cross(c)).abs();
+    let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+    2.0 * num.atan2(den)
+}
+
+#[test]
+fn area_light_pdf_is_a_density_over_solid_angle() {
+    // E[1/pdf] over samples equals the solid angle the light subtends exactly
+    // when the pdf is the correct solid-angle density (dist^2 / (A cos)).
+    // CS184's dist / (A cos) would be off by a factor of the distance.
+    let scene = pathtracer::scene::builtin::load().unwrap();
+    let lights = Lights::from_scene(&scene).unwrap();
+    let quad = lights.lights.iter().find(|l| matches!(l, Light::Mesh { .. })).unwrap();
+    let (lo, hi) = light_quad_bounds(&scene, quad);
+    let points = [Vec3::new(0.3, 0.4, -0.2), Vec3::new(-0.9, 0.05, 0.9), Vec3::new(0.0, 1.2, 0.0)];
+    let z = z_crit(0.01, points.len());
+    for p in points {
+        let pd = p.as_dvec3();
+        let corners = [(hi.x, lo.z), (hi.x, hi.z), (lo.x, hi.z), (lo.x, lo.z)].map(|(x, zz)| glam::DVec3::new(x as f64, lo.y as f64, zz as f64) - pd);
+        let omega = triangle_solid_angle(corners[0], corners[1], corners[2]) + triangle_solid_angle(corners[0], corners[2], corners[3]);
+        let mut rng = Rng::new(5, 6);
+        let n = 400_000;
+        let (mut s1, mut s2) = (0.0f64, 0.0f64);
+        for _ in 0..n {
+            let u = rng.uniform2();
+            let s = quad.sample(&scene, p, u, rng.uniform()).unwrap();
+            let x = 1.0 / s.pdf as f64;
+            s1 += x;
+            s2 += x * x;
+        }
+        let mean = s1 / n as f64;
+        let se = ((s2 / n as f64 - mean * mean) / (n as f64 - 1.0)).sqrt();
+        assert!(se < 0.01 * omega, "underpowered: se {se} for omega {omega}");
+        assert!((mean - omega).abs() <= z * se, "from {p}: E[1/pdf] = {mean} +- {se}, solid angle {omega}");
+    }
+}
+
+// ---------------------------------------------------------------- scenes in code
+
+fn diffuse(name: &str, albedo: f32, emission: f32) -> Material {
+    Material { name: name.into(), bsdf: Bsdf::Diffuse { albedo: Vec3::splat(albedo) }, emission: Vec3::splat(emission) }
+}
+
+/// A welded cube [-h,h]^3 (shared vertices), every triangle wound to face
+/// `inward` or outward. Its vertex normals are CS184's area-weighted ones,
+/// diagonal at the corners.
+fn cube_mesh(h: f32, center: Vec3, inward: bool) -> TriangleMesh {
+    let v: Vec<Vec3> = (0..8).map(|i| center + h * Vec3::new(if i & 1 == 0 { -1.0 } else { 1.0 }, if i & 2 == 0 { -1.0 } else { 1.0 }, if i & 4 == 0 { -1.0 } else { 1.0 })).collect();
+    let quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+    let mut triangles = Vec::new();
+    for q in quads {
+        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+            let [a, b, c] = t.map(|i: u32| v[i as usize]);
+            let n = (b - a).cross(c - a);
+            let faces_in = n.dot(center - a) > 0.0;
+            triangles.push(if faces_in == inward { t } else { [t[0], t[2], t[1]] });
+        }
+    }
+    let mut m = TriangleMesh { positions: v, triangles, normals: vec![] };
+    m.compute_normals();
+    m
+}
+
+/// The same cube with each face's vertices its own, so vertex normals equal
+/// face normals: flat shading, which the furnace's closed forms assume.
+/// Shared edges still have bit-identical coordinates: it stays watertight.
+fn flat_cube_mesh(h: f32, center: Vec3, inward: bool) -> TriangleMesh {
+    let welded = cube_mesh(h, center, inward);
+    let mut m = TriangleMesh::default();
+    for t in &welded.triangles {
+        let base = m.positions.len() as u32;
+        m.positions.extend(t.map(|i| welded.positions[i as usize]));
+        m.triangles.push([base, base + 1, base + 2]);
+    }
+    m.compute_normals();
+    m
+}
+
+fn scene_of(shapes: Vec<(Shape, Material)>, lights: Vec<LightDesc>) -> Scene {
+    let mut scene = Scene {
+        name: "test".into(),
+        source: "<test>".into(),
+        shapes: vec![],
+        objects: vec![],
+        materials: vec![],
+        lights,
+        camera: CameraDesc::default(),
+    };
+    for (i, (s, m)) in shapes.into_iter().enumerate() {
+        scene.shapes.push(s);
+        scene.materials.push(m);
+        scene.objects.push(Object { name: format!("shape{i}"), material: i });
+    }
+    scene
+}
+
+/// A camera at `pos` looking down -z with a 60-degree field of view.
+fn camera_at(scene: &Scene, pos: Vec3, w: u32, h: u32) -> Camera {
+    let mut c = Camera::from_scene(scene);
+    c.pos = pos;
+    c.c2w = Mat3::IDENTITY;
+    c.near = 0.0;
+    c.far = f32::INFINITY;
+    c.hfov_deg = 60.0;
+    c.vfov_deg = (2.0 * ((30f32).to_radians().tan() * h as f32 / w as f32).atan()).to_degrees();
+    c
+}
+
+struct Stats {
+    mean: f64,
+    se: f64,
+    pixels: Vec<(f64, f64)>, // (mean, variance of mean), illuminance
+    all_finite: bool,
+    width: u32,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_stats(scene: &Scene, camera: &Camera, backend: BackendKind, m: u32, accumulate: bool, hemisphere: bool, rr: bool, spp: u32, seed: u64, w: u32, h: u32) -> Stats {
+    let accel = common::build(backend, &scene.shapes);
+    let lights = Lights::from_scene(scene).unwrap();
+    let integ = PathTracer { scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate, hemisphere, light_samples: 1, russian_roulette: rr };
+    let settings = RenderSettings { width: w, height: h, spp, seed, region: None, adaptive: None, progress: false };
+    let out = render::render(camera, &integ, &settings);
+    let lum = |c: Vec3| (c.x as f64 + c.y as f64 + c.z as f64) / 3.0;
+    let pixels: Vec<(f64, f64)> = out.image.pixels.iter().zip(&out.variance.pixels).map(|(p, v)| (lum(*p), lum(*v) / 3.0)).collect();
+    let all_finite = out.image.pixels.iter().chain(&out.variance.pixels).all(|p| p.is_finite());
+    let n = pixels.len() as f64;
+    let mean = pixels.iter().map(|p| p.0).sum::<f64>() / n;
+    // Pixels are independent (own RNG streams): the variance of the image
+    // mean is the sum of the per-pixel variances of the mean over n^2. The
+    // channel average's variance is bounded by the mean channel variance.
+    let se = (pixels.iter().map(|p| p.1 * 3.0).sum::<f64>()).sqrt() / n;
+    Stats { mean, se, pixels, all_finite, width: w }
+}
+
+fn furnace(le: f32, rho: f32) -> (Scene, Camera) {
+    let scene = scene_of(vec![(Shape::Mesh(flat_cube_mesh(1.0, Vec3::ZERO, true)), diffuse("wall", rho, le))], vec![]);
+    let cam = camera_at(&scene, Vec3::new(0.1, -0.2, 0.3), 16, 16);
+    (scene, cam)
+}
+
+#[test]
+fn enclosure_furnace_matches_closed_forms() {
+    let (le, rho) = (1.0f32, 0.5f32);
+    let (scene, cam) = furnace(le, rho);
+    let ks = [1u32, 2, 5];
+    let z = z_crit(0.01, ks.len() + 2);
+    // -m 0: emission only, exactly Le everywhere.
+    let s = render_stats(&scene, &cam, BackendKind::Native, 0, true, false, false, 4, 1, 16, 16);
+    assert!(s.pixels.iter().all(|p| p.0 == le as f64), "-m 0 is not exactly Le");
+    // Truncated sums without RR: Le (1 - rho^(k+1)) / (1 - rho).
+    for k in ks {
+        let expect = le as f64 * (1.0 - (rho as f64).powi(k as i32 + 1)) / (1.0 - rho as f64);
+        let s = render_stats(&scene, &cam, BackendKind::Native, k, true, false, false, 256, 7 + k as u64, 16, 16);
+        assert!(s.se < 0.005 * expect, "-m {k}: underpowered (se {})", s.se);
+        assert!((s.mean - expect).abs() <= z * s.se, "-m {k}: {} +- {} vs {expect}", s.mean, s.se);
+    }
+    // With Russian roulette and a deep cap: Le / (1 - rho); also through -H.
+    let expect = le as f64 / (1.0 - rho as f64);
+    for hemi in [false, true] {
+        let s = render_stats(&scene, &cam, BackendKind::Native, 1000, true, hemi, true, 256, 3, 16, 16);
+        assert!(s.se < 0.005 * expect, "RR -H={hemi}: underpowered (se {})", s.se);
+        assert!((s.mean - expect).abs() <= z * s.se, "RR -H={hemi}: {} +- {} vs {expect}", s.mean, s.se);
+    }
+}
+
+#[test]
+fn single_bounce_images_sum_to_the_accumulated_image() {
+    let (scene, cam) = furnace(1.0, 0.5);
+    let k = 3;
+    let acc = render_stats(&scene, &cam, BackendKind::Native, k, true, false, false, 256, 11, 16, 16);
+    let (mut sum, mut var) = (0.0, acc.se * acc.se);
+    for m in 0..=k {
+        let s = render_stats(&scene, &cam, BackendKind::Native, m, false, false, false, 256, 20 + m as u64, 16, 16);
+        sum += s.mean;
+        var += s.se * s.se;
+    }
+    let z = z_crit(0.01, 1);
+    assert!(var.sqrt() < 0.005 * acc.mean, "underpowered");
+    assert!((sum - acc.mean).abs() <= z * var.sqrt(), "sum of -o 0 images {sum} vs accumulated {} (se {})", acc.mean, var.sqrt());
+}
+
+#[test]
+fn sealed_room_with_the_light_outside_is_exactly_black() {
+    for (offset, scale) in [(Vec3::ZERO, 1.0f32), (Vec3::new(1e3, -2e3, 5e2), 1.0), (Vec3::ZERO, 1e-3), (Vec3::new(1e4, 0.0, 0.0), 1e3)] {
+        let room = cube_mesh(scale, offset, true);
+        // A bright emissive quad just outside the ceiling, facing down onto it,
+        // a point light, and a hemisphere light: none may leak in.
+        let y = offset.y + 1.01 * scale;
+        let quad = TriangleMesh {
+            positions: [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].iter().map(|&(x, z)| offset + Vec3::new(x * scale, 0.0, z * scale) + Vec3::Y * (y - offset.y)).collect(),
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            normals: vec![],
+        };
+        let mut quad = quad;
+        // Face down (-y): wind so the normal points at the room.
+        if (quad.positions[1] - quad.positions[0]).cross(quad.positions[2] - quad.positions[0]).y > 0.0 {
+            quad.triangles = vec![[0, 2, 1], [0, 3, 2]];
+        }
+        quad.compute_normals();
+        let point = LightDesc { name: "p".into(), kind: LightKind::Point, radiance: Vec3::splat(100.0 * scale * scale), transform: glam::Mat4::from_translation(offset + Vec3::Y * 2.0 * scale) };
+        let hemi = LightDesc { name: "h".into(), kind: LightKind::Ambient, radiance: Vec3::ONE, transform: glam::Mat4::IDENTITY };
+        let scene = scene_of(vec![(Shape::Mesh(room), diffuse("wall", 0.8, 0.0)), (Shape::Mesh(quad), diffuse("lamp", 0.0, 50.0))], vec![point, hemi]);
+        let cam = camera_at(&scene, offset + Vec3::new(0.2, -0.3, 0.5) * scale, 16, 16);
+        for backend in common::backends() {
+            for hemi in [false, true] {
+                let s = render_stats(&scene, &cam, backend, 5, true, hemi, true, 16, 5, 16, 16);
+                let lit = s.pixels.iter().filter(|p| p.0 != 0.0).count();
+                assert_eq!(lit, 0, "{backend} -H={hemi}: light leaked into the sealed room (offset {offset}, scale {scale})");
+            }
+        }
+    }
+}
+
+fn cornell(w: u32, h: u32) -> (Scene, Camera) {
+    let scene = pathtracer::scene::builtin::load().unwrap();
+    let mut cam = Camera::from_scene(&scene);
+    // Keep the 800x600 field of view at a small size: rescale the pixel focal length.
+    cam.screen_dist *= w as f32 / 800.0;
+    cam.set_screen_size(w, h);
+    (scene, cam)
+}
+
+/// Image mean and block means (4x4 blocks) of two renders must agree.
+///
+/// Blocks darker than 1 % of the image mean are left to the global test:
+/// there, light reaches the surface only at grazing angles, hemisphere
+/// sampling finds it in a handful of samples or none, and the sample variance
+/// of such a rare event says nothing about the estimator's real variance.
+fn assert_agree(a: &Stats, b: &Stats, h: u32, what: &str, rel_power: f64) {
+    let blocks = 4u32;
+    let z = z_crit(0.01, 1 + (blocks * blocks) as usize);
+    let mut tested = 0;
+    let se = (a.se * a.se + b.se * b.se).sqrt();
+    assert!(se < rel_power * a.mean, "{what}: underpowered (se {se}, mean {})", a.mean);
+    assert!((a.mean - b.mean).abs() <= z * se, "{what}: image means {} vs {} (se {se})", a.mean, b.mean);
+    let (bw, bh) = (a.width / blocks, h / blocks);
+    for by in 0..blocks {
+        for bx in 0..blocks {
+            let (mut ma, mut mb, mut va, mut vb, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for y in by * bh..(by + 1) * bh {
+                for x in bx * bw..(bx + 1) * bw {
+                    let i = (y * a.width + x) as usize;
+                    ma += a.pixels[i].0;
+                    mb += b.pixels[i].0;
+                    va += a.pixels[i].1 * 3.0;
+                    vb += b.pixels[i].1 * 3.0;
+                    n += 1.0;
+                }
+            }
+            let se = (va + vb).sqrt() / n;
+            if ma / n < 0.01 * a.mean {
+                continue;
+            }
+            tested += 1;
+            assert!((ma - mb).abs() / n <= z * se, "{what}: block {bx},{by}: {} vs {} (se {se})", ma / n, mb / n);
+        }
+    }
+    assert!(tested >= 12, "{what}: only {tested} of 16 blocks bright enough to test");
+}
+
+#[test]
+fn hemisphere_and_light_sampling_agree() {
+    let (w, h) = (32, 24);
+    let (scene, cam) = cornell(w, h);
+    for m in [1u32, 3] {
+        let light = render_stats(&scene, &cam, BackendKind::Native, m, true, false, true, 512, 1, w, h);
+        let hemi = render_stats(&scene, &cam, BackendKind::Native, m, true, true, true, 4096, 2, w, h);
+        assert!(light.all_finite && hemi.all_finite);
+        assert_agree(&light, &hemi, h, &format!("-m {m}: light vs hemisphere sampling"), 0.01);
+    }
+}
+
+#[test]
+fn russian_roulette_changes_variance_not_the_mean() {
+    let (w, h) = (32, 24);
+    let (scene, cam) = cornell(w, h);
+    let plain = render_stats(&scene, &cam, BackendKind::Native, 20, true, false, false, 512, 3, w, h);
+    let rr = render_stats(&scene, &cam, BackendKind::Native, 20, true, false, true, 512, 4, w, h);
+    assert_agree(&plain, &rr, h, "RR vs no RR at -m 20", 0.01);
+    eprintln!("-m 20: image se without RR {:.5}, with RR {:.5}", plain.se, rr.se);
+}
+
+#[test]
+fn no_nan_or_inf_on_any_supported_shipped_scene() {
+    let mut rendered = Vec::new();
+    for path in common::shipped_scenes() {
+        let scene = common::load(&path);
+        if pathtracer::cli::check_materials(&scene).is_err() {
+            continue;
+        }
+        let mut cam = Camera::from_scene(&scene);
+        cam.screen_dist *= 0.1;
+        cam.set_screen_size(80, 60);
+        for hemi in [false, true] {
+            let s = render_stats(&scene, &cam, BackendKind::Native, 4, true, hemi, true, 4, 9, 80, 60);
+            assert!(s.all_finite, "{}: non-finite output (-H={hemi})", path.display());
+        }
+        rendered.push(scene.name);
+    }
+    assert!(rendered.len() >= 11, "only {rendered:?} rendered");
+    eprintln!("finite on {} scenes: {rendered:?}", rendered.len());
+}
+
+#[test]
+fn point_light_falls_off_with_the_square_of_distance() {
+    // A large floor at y=0 lit by a point light of intensity I at height d:
+    // the pixel straight below sees L = (rho/pi) * I / d^2 exactly (one
+    // delta-light sample, no randomness in the direct term).
+    let floor = TriangleMesh {
+        positions: vec![Vec3::new(-100.0, 0.0, -100.0), Vec3::new(100.0, 0.0, -100.0), Vec3::new(0.0, 0.0, 100.0)],
+        triangles: vec![[0, 2, 1]],
+        normals: vec![],
+    };
+    let mut floor = floor;
+    floor.compute_normals();
+    for d in [1.0f32, 2.0, 4.0] {
+        let light = LightDesc { name: "p".into(), kind: LightKind::Point, radiance: Vec3::splat(3.0), transform: glam::Mat4::from_translation(Vec3::new(0.0, d, 0.0)) };
+        let scene = scene_of(vec![(Shape::Mesh(floor.clone()), diffuse("floor", 0.5, 0.0))], vec![light]);
+        let mut cam = camera_at(&scene, Vec3::new(0.0, 10.0, 0.0), 1, 1);
+        // Look straight down.
+        cam.c2w = Mat3::from_cols(Vec3::X, Vec3::NEG_Z, Vec3::Y);
+        let s = render_stats(&scene, &cam, BackendKind::Native, 1, true, false, false, 1, 0, 1, 1);
+        let expect = 0.5 / std::f64::consts::PI * 3.0 / (d as f64 * d as f64);
+        assert!((s.mean - expect).abs() <= 1e-5 * expect, "d = {d}: {} vs {expect}", s.mean);
+    }
+}
