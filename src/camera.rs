@@ -114,6 +114,13 @@ impl Camera {
         self.vfov_deg = (2.0 * (h as f32 / (2.0 * self.screen_dist)).atan()).to_degrees();
     }
 
+    /// Our alternative to `-r`'s crop: resize the frame and keep the
+    /// horizontal field of view, so a small image shows the whole view.
+    pub fn resize_keep_fov(&mut self, w: u32, h: u32) {
+        self.screen_dist *= w as f32 / self.screen_w as f32;
+        self.set_screen_size(w, h);
+    }
+
     /// The ray through normalised image coordinates `(x, y)` in `[0,1]^2`,
     /// `(0,0)` at the bottom-left, with the clip range as its `t` range.
     #[inline]

@@ -31,6 +31,14 @@ pub struct Cli {
 pub enum Command {
     /// Time BVH builds and ray throughput per backend, and print a table.
     Bench(crate::bench::BenchArgs),
+    /// Error of OpenEXR images against a reference: relMSE and relative bias.
+    Compare {
+        /// The reference image (linear OpenEXR)
+        reference: PathBuf,
+        /// Images to compare with it
+        #[arg(required = true)]
+        images: Vec<PathBuf>,
+    },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -69,6 +77,9 @@ pub struct RenderArgs {
     /// Frame size in pixels [default: 800 600]; keeps CS184's pixel focal length
     #[arg(short = 'r', num_args = 2, value_names = ["W", "H"], allow_negative_numbers = true)]
     pub resolution: Option<Vec<String>>,
+    /// With -r: scale the 800x600 view to the new size instead of cropping it
+    #[arg(long, requires = "resolution")]
+    pub keep_fov: bool,
     /// Output PNG (also writes <FILE minus extension>_rate.png) [default: ./<scene>.png]
     #[arg(short = 'f', value_name = "FILE")]
     pub output: Option<PathBuf>,
@@ -127,6 +138,7 @@ pub fn main() -> ExitCode {
     let no_arguments = std::env::args_os().len() == 1;
     let result = match cli.command {
         Some(Command::Bench(b)) => crate::bench::run(&b),
+        Some(Command::Compare { reference, images }) => compare(&reference, &images),
         None if no_arguments => {
             // The demo render: CS184's defaults (1 spp, direct light only)
             // would give a noisy, flat picture of the built-in scene.
@@ -243,7 +255,11 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let scene = load_scene(a.scene.as_deref())?;
     let mut camera = Camera::from_scene(&scene);
     if a.resolution.is_some() {
-        camera.set_screen_size(width, height);
+        if a.keep_fov {
+            camera.resize_keep_fov(width, height);
+        } else {
+            camera.set_screen_size(width, height);
+        }
     }
     if let Some(c) = &a.camera {
         camera.load_settings(c)?;
@@ -314,6 +330,23 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         threads,
         written.join(", ")
     );
+    Ok(())
+}
+
+fn compare(reference: &Path, images: &[PathBuf]) -> Result<()> {
+    let r = image_io::read_exr(reference)?;
+    for p in images {
+        let img = image_io::read_exr(p)?;
+        if (img.width, img.height) != (r.width, r.height) {
+            crate::bail!("{}: {}x{} but the reference is {}x{}", p.display(), img.width, img.height, r.width, r.height);
+        }
+        println!(
+            "{} | relMSE {:.6e} | relative bias {:+.4}%",
+            p.display(),
+            crate::metrics::rel_mse(&img, &r),
+            100.0 * crate::metrics::rel_bias(&img, &r)
+        );
+    }
     Ok(())
 }
 

@@ -9,6 +9,7 @@ pub mod error;
 pub mod geometry;
 pub mod image_io;
 pub mod light;
+pub mod metrics;
 pub mod ray;
 pub mod render;
 pub mod rng;

@@ -123,3 +123,44 @@ fn unsupported_materials_are_refused_by_name() {
     assert!(err.contains("CBspheres.dae") && err.trim_end().lines().count() == 1, "{err}");
     assert!(std::fs::read_dir(&d).unwrap().next().is_none(), "output written");
 }
+
+#[test]
+fn path_tracing_is_identical_across_thread_counts_and_backends() {
+    let d = scratch("pt-determinism");
+    let base = ["-s", "4", "-m", "3", "-r", "64", "48", "--seed", "3"];
+    let with = |extra: &[&str]| -> Vec<String> { base.iter().chain(extra).map(|s| s.to_string()).collect() };
+    let args_ref = with(&["-t", "1", "--backend", "native"]);
+    let reference = render_exr(&d, "ref", &args_ref.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(reference.pixels.iter().all(|p| p.is_finite()));
+    let mut variants = vec![("t2", vec!["-t", "2", "--backend", "native"]), ("brute", vec!["-t", "2", "--backend", "brute"])];
+    if pathtracer::accel::embree::available() {
+        variants.push(("embree", vec!["-t", "2", "--backend", "embree"]));
+    }
+    for (name, extra) in variants {
+        let args = with(&extra);
+        let img = render_exr(&d, name, &args.iter().map(String::as_str).collect::<Vec<_>>());
+        let differing = img.pixels.iter().zip(&reference.pixels).filter(|(a, b)| a != b).count();
+        assert_eq!(differing, 0, "{name}: {differing} pixels differ from -t 1 native");
+    }
+}
+
+#[test]
+fn adaptive_sampling_writes_a_rate_image_and_stops_early() {
+    let d = scratch("adaptive");
+    for (name, extra) in [("cs184", vec![]), ("pilot", vec!["--adaptive-pilot"])] {
+        let png = d.join(format!("{name}.png"));
+        let var = d.join(format!("{name}_var.exr"));
+        // A cell over the box's top-left corner: background, wall and ceiling.
+        let mut args = vec!["-s", "256", "-a", "32", "0.05", "-m", "2", "-p", "140", "420", "64", "48", "-f", png.to_str().unwrap(), "--variance-exr", var.to_str().unwrap()];
+        args.extend(extra);
+        let out = run(&d, &args);
+        let rate = image::open(d.join(format!("{name}_rate.png"))).unwrap().to_rgba8();
+        assert_eq!(rate.dimensions(), (64, 48));
+        let red = rate.pixels().filter(|p| p.0 == [255, 0, 0, 255]).count();
+        let blueish = rate.pixels().filter(|p| p.0[2] > 0).count();
+        // Background pixels (black, sigma = 0) stop after the first batch;
+        // the noisy box needs more, some all 256.
+        assert!(blueish > 0 && red < 64 * 48, "{name}: rate image has no early stops: {}", String::from_utf8_lossy(&out.stdout));
+        assert!(pathtracer::image_io::read_exr(&var).unwrap().pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
+    }
+}

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Regenerates the README's gallery (docs/gallery): CS184's figures from our CLI.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release -q
+pt=target/release/pathtracer
+g=docs/gallery
+mkdir -p "$g"
+bunny=${SCENES:-../shared/scenes/cs184}/sky/CBbunny.dae
+size=(-r 200 150 --keep-fov --seed 1)
+for m in 0 1 2 3 4 5; do
+    "$pt" "$bunny" "${size[@]}" -s 256 -m $m -f "$g/bunny_m${m}.png" > /dev/null
+    "$pt" "$bunny" "${size[@]}" -s 256 -m $m -o 0 -f "$g/bunny_m${m}_o0.png" > /dev/null
+done
+"$pt" "$bunny" "${size[@]}" -s 256 -m 100 -f "$g/bunny_m100_rr.png" > /dev/null
+for s in 1 4 16 64 256 1024; do
+    "$pt" "${size[@]}" -s $s -m 5 -f "$g/spheres_s${s}.png" > /dev/null
+done
+for l in 1 4 16 64; do
+    "$pt" "${size[@]}" -s 1 -l $l -m 1 -f "$g/spheres_l${l}.png" > /dev/null
+done
+"$pt" "$bunny" "${size[@]}" -s 1024 -a 64 0.05 -m 5 -f "$g/bunny_adaptive.png" > /dev/null
+rm -f "$g"/*_rate.png.tmp
+# Keep only the rate image of the adaptive render.
+find "$g" -name '*_rate.png' ! -name 'bunny_adaptive_rate.png' -delete
+ls "$g"
