@@ -50,13 +50,15 @@ struct PrimRef {
     index: u32,
 }
 
-enum BuildNode {
+/// The binary tree the SAH build produces; `bvh4` collapses it to 4-wide.
+pub(super) enum BuildNode {
+    /// `first..first+count` index the primitive order returned with the tree.
     Leaf { bounds: Aabb, first: usize, count: usize },
     Interior { bounds: Aabb, axis: usize, children: Box<(BuildNode, BuildNode)> },
 }
 
 impl BuildNode {
-    fn bounds(&self) -> &Aabb {
+    pub(super) fn bounds(&self) -> &Aabb {
         match self {
             BuildNode::Leaf { bounds, .. } | BuildNode::Interior { bounds, .. } => bounds,
         }
@@ -69,20 +71,11 @@ impl Bvh {
     }
 
     fn from_prims(prims: Vec<Prim>) -> Self {
-        let mut refs: Vec<PrimRef> = prims
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let b = p.bounds();
-                PrimRef { bounds: b, centroid: b.center(), index: i as u32 }
-            })
-            .collect();
-        if refs.is_empty() {
+        let Some((root, order)) = build_tree(&prims) else {
             let empty = Node { min: [f32::INFINITY; 3], offset: 0, max: [f32::NEG_INFINITY; 3], count: 0, axis: 0 };
-            return Bvh { nodes: vec![Node { count: 0, ..empty }], prims, depth: 0 };
-        }
-        let root = build_recursive(&mut refs, 0, 0);
-        let ordered: Vec<Prim> = refs.iter().map(|r| prims[r.index as usize]).collect();
+            return Bvh { nodes: vec![empty], prims, depth: 0 };
+        };
+        let ordered: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
         let mut nodes = Vec::with_capacity(2 * ordered.len() / 2 + 1);
         let depth = flatten(&root, &mut nodes, 1);
         Bvh { nodes, prims: ordered, depth }
@@ -190,8 +183,26 @@ impl Traversal for Bvh {
     }
 }
 
+/// Binned-SAH build over `prims`: the tree and the primitive order its leaves
+/// index. `None` for no primitives.
+pub(super) fn build_tree(prims: &[Prim]) -> Option<(BuildNode, Vec<u32>)> {
+    let mut refs: Vec<PrimRef> = prims
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let b = p.bounds();
+            PrimRef { bounds: b, centroid: b.center(), index: i as u32 }
+        })
+        .collect();
+    if refs.is_empty() {
+        return None;
+    }
+    let root = build_recursive(&mut refs, 0, 0);
+    Some((root, refs.iter().map(|r| r.index).collect()))
+}
+
 /// Ize's conservative factor, 1 + 2*gamma(3) with gamma(n) = n*eps/(1 - n*eps).
-const ROBUST_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(super) const ROBUST_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 /// Per-ray constants of the slab test. `inv` is the true reciprocal, with
 /// infinities for zero components; the near/far planes are chosen by the sign

@@ -43,6 +43,14 @@ impl RayTransform {
     }
 }
 
+impl RayTransform {
+    /// The shear as `([kx, ky, kz], [sx, sy, sz])`, for SIMD versions of the
+    /// test that must compute exactly what `intersect_triangle` does.
+    pub fn shear(&self) -> ([usize; 3], [f32; 3]) {
+        ([self.kx, self.ky, self.kz], [self.sx, self.sy, self.sz])
+    }
+}
+
 /// Returns `(t, u, v)` for a hit with `tmin < t <= tmax`, where `u` and `v`
 /// are the barycentric weights of `p1` and `p2` (so the hit point is
 /// `(1-u-v) p0 + u p1 + v p2`). Triangles are two-sided. A degenerate

@@ -1,0 +1,467 @@
+//! The native backend's fast layout: the binned-SAH binary tree collapsed
+//! into a 4-wide BVH, traversed with SSE (4 boxes per test) and leaves of
+//! triangles packed 4 to a group and tested together.
+//!
+//! Every lane performs exactly the scalar operations of `intersect_triangle`
+//! and of the binary BVH's box test, in the same order, so answers are
+//! bit-identical to the scalar code (and so to the brute-force oracle). The
+//! SIMD code is SSE2, part of every x86-64 CPU; other targets run the scalar
+//! lane loop, which gives the same answers.
+
+use super::bvh::{build_tree, BuildNode, ROBUST_SCALE};
+use super::prims::{self, closer, Prim};
+use super::{Hit, Traversal};
+use crate::geometry::{intersect_triangle, Aabb, RayTransform};
+use crate::ray::Ray;
+use crate::scene::Shape;
+use glam::Vec3;
+
+const WIDTH: usize = 4;
+const EMPTY: u32 = u32::MAX;
+const LEAF_BIT: u32 = 1 << 31;
+const STACK: usize = 256;
+
+/// Four children's boxes in SoA form, and what each child is: a node index,
+/// a leaf (`LEAF_BIT | leaf index`) or `EMPTY`. 128 bytes, two cache lines.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Node4 {
+    /// `bounds[0..3]` = min x, y, z; `bounds[3..6]` = max x, y, z.
+    bounds: [[f32; WIDTH]; 6],
+    child: [u32; WIDTH],
+    _pad: [u32; 4],
+}
+
+/// Four triangles, SoA: `v[k][axis][lane]` is vertex k's coordinate.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct TriGroup {
+    v: [[[f32; WIDTH]; 3]; 3],
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Leaf {
+    /// Triangle groups `groups[group..group+n_groups]`; their lanes map to
+    /// `lanes[4*group ..]` (the `Prim` each lane came from, or none).
+    group: u32,
+    n_groups: u32,
+    /// Spheres: `spheres[sphere..sphere+n_spheres]`.
+    sphere: u32,
+    n_spheres: u32,
+}
+
+pub struct Bvh4 {
+    nodes: Vec<Node4>,
+    leaves: Vec<Leaf>,
+    groups: Vec<TriGroup>,
+    /// Per group lane: index into `prims` or `EMPTY` for padding.
+    lanes: Vec<u32>,
+    spheres: Vec<u32>,
+    prims: Vec<Prim>,
+    /// The root: a node, or a leaf when the scene is tiny.
+    root: u32,
+}
+
+impl Bvh4 {
+    pub fn build(shapes: &[Shape]) -> Self {
+        let prims = prims::collect(shapes);
+        let mut b = Bvh4 { nodes: Vec::new(), leaves: Vec::new(), groups: Vec::new(), lanes: Vec::new(), spheres: Vec::new(), prims: Vec::new(), root: EMPTY };
+        let Some((tree, order)) = build_tree(&prims) else { return b };
+        b.prims = order.iter().map(|&i| prims[i as usize]).collect();
+        b.root = b.emit(&tree);
+        b
+    }
+
+    /// Flatten `node` depth-first; returns its child code.
+    fn emit(&mut self, node: &BuildNode) -> u32 {
+        match node {
+            BuildNode::Leaf { first, count, .. } => self.emit_leaf(*first, *count),
+            BuildNode::Interior { .. } => {
+                // Open the largest child until four children (or only leaves) remain.
+                let mut kids: Vec<&BuildNode> = vec![node];
+                while kids.len() < WIDTH {
+                    let best = kids
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, k)| matches!(k, BuildNode::Interior { .. }))
+                        .max_by(|a, b| a.1.bounds().half_area().total_cmp(&b.1.bounds().half_area()))
+                        .map(|(i, _)| i);
+                    let Some(i) = best else { break };
+                    let BuildNode::Interior { children, .. } = kids.remove(i) else { unreachable!() };
+                    kids.insert(i, &children.1);
+                    kids.insert(i, &children.0);
+                }
+                let idx = self.nodes.len();
+                self.nodes.push(Node4 { bounds: [[f32::INFINITY; WIDTH], [f32::INFINITY; WIDTH], [f32::INFINITY; WIDTH], [f32::NEG_INFINITY; WIDTH], [f32::NEG_INFINITY; WIDTH], [f32::NEG_INFINITY; WIDTH]], child: [EMPTY; WIDTH], _pad: [0; 4] });
+                for (lane, k) in kids.iter().enumerate() {
+                    let code = self.emit(k);
+                    let b: &Aabb = k.bounds();
+                    let n = &mut self.nodes[idx];
+                    for a in 0..3 {
+                        n.bounds[a][lane] = b.min[a];
+                        n.bounds[3 + a][lane] = b.max[a];
+                    }
+                    n.child[lane] = code;
+                }
+                idx as u32
+            }
+        }
+    }
+
+    fn emit_leaf(&mut self, first: usize, count: usize) -> u32 {
+        let group = self.groups.len() as u32;
+        let sphere = self.spheres.len() as u32;
+        let tris: Vec<u32> = (first..first + count).filter(|&i| !self.prims[i].is_sphere()).map(|i| i as u32).collect();
+        self.spheres.extend((first..first + count).filter(|&i| self.prims[i].is_sphere()).map(|i| i as u32));
+        for chunk in tris.chunks(WIDTH) {
+            let mut g = TriGroup { v: [[[0.0; WIDTH]; 3]; 3] };
+            for lane in 0..WIDTH {
+                // Padding lanes repeat the first triangle; `lanes` marks them empty.
+                let p = &self.prims[chunk[lane.min(chunk.len() - 1)] as usize];
+                for k in 0..3 {
+                    for a in 0..3 {
+                        g.v[k][a][lane] = p.v[k][a];
+                    }
+                }
+                self.lanes.push(if lane < chunk.len() { chunk[lane] } else { EMPTY });
+            }
+            self.groups.push(g);
+        }
+        let leaf = Leaf { group, n_groups: self.groups.len() as u32 - group, sphere, n_spheres: self.spheres.len() as u32 - sphere };
+        self.leaves.push(leaf);
+        LEAF_BIT | (self.leaves.len() as u32 - 1)
+    }
+
+    /// Intersect a leaf; `visit(prim index, t, u, v)` returns true to stop.
+    #[inline]
+    fn leaf<F: FnMut(u32, f32, f32, f32) -> bool>(&self, leaf: &Leaf, ray: &Ray, rt: &RayTransform, shear: &Shear, tmax: f32, visit: &mut F) -> bool {
+        for gi in leaf.group..leaf.group + leaf.n_groups {
+            let g = &self.groups[gi as usize];
+            let lanes = &self.lanes[gi as usize * WIDTH..gi as usize * WIDTH + WIDTH];
+            let mut out = [LaneHit::default(); WIDTH];
+            let mask = intersect_group(g, rt, shear, ray.tmin, tmax, &mut out);
+            for lane in 0..WIDTH {
+                if mask & (1 << lane) != 0 && lanes[lane] != EMPTY {
+                    let h = out[lane];
+                    if visit(lanes[lane], h.t, h.u, h.v) {
+                        return true;
+                    }
+                }
+            }
+        }
+        for &si in &self.spheres[leaf.sphere as usize..(leaf.sphere + leaf.n_spheres) as usize] {
+            let p = &self.prims[si as usize];
+            if let Some((t, u, v)) = p.intersect(rt, ray.dir, ray.tmin, tmax) {
+                if visit(si, t, u, v) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// Front-to-back traversal; `visit` may lower `tmax` and returns true to stop.
+    #[inline]
+    fn walk<F: FnMut(u32, f32, f32, f32, &mut f32) -> bool>(&self, ray: &Ray, mut visit: F) {
+        if self.root == EMPTY {
+            return;
+        }
+        let rt = RayTransform::new(ray.origin, ray.dir);
+        let shear = Shear::new(&rt);
+        let slab = Slab4::new(ray);
+        let mut tmax = ray.tmax;
+        // Stack of (child code, entry distance).
+        let mut stack = [(0u32, 0.0f32); STACK];
+        let mut sp = 0;
+        let mut cur = self.root;
+        loop {
+            if cur & LEAF_BIT != 0 {
+                let leaf = &self.leaves[(cur & !LEAF_BIT) as usize];
+                let mut stop = false;
+                self.leaf(leaf, ray, &rt, &shear, tmax, &mut |i, t, u, v| {
+                    stop = visit(i, t, u, v, &mut tmax);
+                    stop
+                });
+                if stop {
+                    return;
+                }
+            } else {
+                let node = &self.nodes[cur as usize];
+                let mut near = [0.0f32; WIDTH];
+                let mask = slab.test(node, ray.tmin, tmax, &mut near);
+                // Push hit children far to near, then continue with the nearest.
+                let mut hits: [(u32, f32); WIDTH] = [(0, 0.0); WIDTH];
+                let mut n = 0;
+                for lane in 0..WIDTH {
+                    if mask & (1 << lane) != 0 {
+                        hits[n] = (node.child[lane], near[lane]);
+                        n += 1;
+                    }
+                }
+                if n > 0 {
+                    let h = &mut hits[..n];
+                    // Insertion sort, farthest first (n <= 4).
+                    for i in 1..n {
+                        let mut j = i;
+                        while j > 0 && h[j - 1].1 < h[j].1 {
+                            h.swap(j - 1, j);
+                            j -= 1;
+                        }
+                    }
+                    for &e in &h[..n - 1] {
+                        stack[sp] = e;
+                        sp += 1;
+                    }
+                    cur = h[n - 1].0;
+                    continue;
+                }
+            }
+            // Pop, skipping subtrees that start beyond the current closest hit.
+            loop {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                let (code, dist) = stack[sp];
+                if dist <= tmax {
+                    cur = code;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+impl Traversal for Bvh4 {
+    fn name(&self) -> &'static str {
+        "native"
+    }
+
+    fn describe(&self) -> String {
+        format!("native (4-wide BVH, binned SAH, SSE, {} nodes, {} leaves)", self.nodes.len(), self.leaves.len())
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.nodes.len() * std::mem::size_of::<Node4>()
+            + self.leaves.len() * std::mem::size_of::<Leaf>()
+            + self.groups.len() * std::mem::size_of::<TriGroup>()
+            + self.lanes.len() * 4
+            + self.spheres.len() * 4
+            + self.prims.len() * std::mem::size_of::<Prim>()
+    }
+
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let mut best: Option<Hit> = None;
+        self.walk(ray, |i, t, u, v, tmax| {
+            let h = self.prims[i as usize].hit(t, u, v);
+            if closer(h, &best) {
+                *tmax = t;
+                best = Some(h);
+            }
+            false
+        });
+        best
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        if !ray.is_valid() {
+            return false;
+        }
+        let mut hit = false;
+        self.walk(ray, |_, _, _, _, _| {
+            hit = true;
+            true
+        });
+        hit
+    }
+}
+
+/// Per-ray slab-test constants, as in the binary BVH (see `bvh::SlabRay`):
+/// true reciprocals, near/far planes chosen by the direction's sign bit, and
+/// comparisons written so a NaN (origin on a plane, zero direction) is ignored.
+struct Slab4 {
+    o: [f32; 3],
+    inv: [f32; 3],
+    /// Index into `Node4::bounds` of the near plane per axis (min or max).
+    near_plane: [usize; 3],
+}
+
+impl Slab4 {
+    fn new(ray: &Ray) -> Self {
+        let d = ray.dir;
+        let neg = [d.x.is_sign_negative(), d.y.is_sign_negative(), d.z.is_sign_negative()];
+        Slab4 {
+            o: ray.origin.to_array(),
+            inv: [1.0 / d.x, 1.0 / d.y, 1.0 / d.z],
+            near_plane: [if neg[0] { 3 } else { 0 }, if neg[1] { 4 } else { 1 }, if neg[2] { 5 } else { 2 }],
+        }
+    }
+
+    /// Bit i set when child i's box is entered in [tmin, tmax]; `near` gets entry distances.
+    #[inline(always)]
+    fn test(&self, n: &Node4, tmin: f32, tmax: f32, near: &mut [f32; WIDTH]) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        unsafe {
+            use std::arch::x86_64::*;
+            let mut t0 = _mm_set1_ps(tmin);
+            let mut t1 = _mm_set1_ps(tmax);
+            let scale = _mm_set1_ps(ROBUST_SCALE);
+            for a in 0..3 {
+                let o = _mm_set1_ps(self.o[a]);
+                let inv = _mm_set1_ps(self.inv[a]);
+                let lo = _mm_load_ps(n.bounds[self.near_plane[a]].as_ptr());
+                let hi = _mm_load_ps(n.bounds[(self.near_plane[a] + 3) % 6].as_ptr());
+                let tn = _mm_mul_ps(_mm_sub_ps(lo, o), inv);
+                let tf = _mm_mul_ps(_mm_mul_ps(_mm_sub_ps(hi, o), inv), scale);
+                // maxps(a, b) = a > b ? a : b, so a NaN in tn leaves t0 as it is.
+                t0 = _mm_max_ps(tn, t0);
+                t1 = _mm_min_ps(tf, t1);
+            }
+            _mm_storeu_ps(near.as_mut_ptr(), t0);
+            _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let mut mask = 0;
+            for lane in 0..WIDTH {
+                let (mut t0, mut t1) = (tmin, tmax);
+                for a in 0..3 {
+                    let lo = n.bounds[self.near_plane[a]][lane];
+                    let hi = n.bounds[(self.near_plane[a] + 3) % 6][lane];
+                    let tn = (lo - self.o[a]) * self.inv[a];
+                    let tf = (hi - self.o[a]) * self.inv[a] * ROBUST_SCALE;
+                    if tn > t0 {
+                        t0 = tn;
+                    }
+                    if tf < t1 {
+                        t1 = tf;
+                    }
+                }
+                near[lane] = t0;
+                if t0 <= t1 {
+                    mask |= 1 << lane;
+                }
+            }
+            mask
+        }
+    }
+}
+
+/// The watertight test's per-ray shear, as axis indices and broadcastable constants.
+struct Shear {
+    k: [usize; 3],
+    s: [f32; 3],
+    o: [f32; 3],
+}
+
+impl Shear {
+    fn new(rt: &RayTransform) -> Self {
+        let (k, s) = rt.shear();
+        Shear { k, s, o: rt.origin.to_array() }
+    }
+}
+
+#[derive(Clone, Copy, Default)]
+struct LaneHit {
+    t: f32,
+    u: f32,
+    v: f32,
+}
+
+/// The watertight test on four triangles at once; bit i set when lane i hits
+/// in (tmin, tmax]. Lane results equal `intersect_triangle` bit for bit; a
+/// lane with an edge function exactly 0 (which needs the f64 path) is
+/// handed to `intersect_triangle` itself.
+#[inline(always)]
+fn intersect_group(g: &TriGroup, rt: &RayTransform, sh: &Shear, tmin: f32, tmax: f32, out: &mut [LaneHit; WIDTH]) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        use std::arch::x86_64::*;
+        let [kx, ky, kz] = sh.k;
+        let ld = |k: usize, a: usize| _mm_load_ps(g.v[k][a].as_ptr());
+        let (ox, oy, oz) = (_mm_set1_ps(sh.o[kx]), _mm_set1_ps(sh.o[ky]), _mm_set1_ps(sh.o[kz]));
+        let (sx, sy, sz) = (_mm_set1_ps(sh.s[0]), _mm_set1_ps(sh.s[1]), _mm_set1_ps(sh.s[2]));
+        // a = p - origin, per needed axis, then the shear.
+        let axk = _mm_sub_ps(ld(0, kx), ox);
+        let ayk = _mm_sub_ps(ld(0, ky), oy);
+        let azk = _mm_sub_ps(ld(0, kz), oz);
+        let bxk = _mm_sub_ps(ld(1, kx), ox);
+        let byk = _mm_sub_ps(ld(1, ky), oy);
+        let bzk = _mm_sub_ps(ld(1, kz), oz);
+        let cxk = _mm_sub_ps(ld(2, kx), ox);
+        let cyk = _mm_sub_ps(ld(2, ky), oy);
+        let czk = _mm_sub_ps(ld(2, kz), oz);
+        let ax = _mm_sub_ps(axk, _mm_mul_ps(sx, azk));
+        let ay = _mm_sub_ps(ayk, _mm_mul_ps(sy, azk));
+        let bx = _mm_sub_ps(bxk, _mm_mul_ps(sx, bzk));
+        let by = _mm_sub_ps(byk, _mm_mul_ps(sy, bzk));
+        let cx = _mm_sub_ps(cxk, _mm_mul_ps(sx, czk));
+        let cy = _mm_sub_ps(cyk, _mm_mul_ps(sy, czk));
+        // edge(p, q) = qx*py - qy*px, as in the scalar code.
+        let e0 = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
+        let e1 = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+        let e2 = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+        let zero = _mm_setzero_ps();
+        let any_zero = _mm_movemask_ps(_mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(e0, zero), _mm_cmpeq_ps(e1, zero)), _mm_cmpeq_ps(e2, zero))) as u32;
+        let neg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(e0, zero), _mm_cmplt_ps(e1, zero)), _mm_cmplt_ps(e2, zero));
+        let pos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(e0, zero), _mm_cmpgt_ps(e1, zero)), _mm_cmpgt_ps(e2, zero));
+        let det = _mm_add_ps(_mm_add_ps(e0, e1), e2);
+        // det finite: |det| < inf (false for NaN).
+        let abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fff_ffff));
+        let finite = _mm_cmplt_ps(_mm_and_ps(det, abs_mask), _mm_set1_ps(f32::INFINITY));
+        let mut ok = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_and_ps(finite, _mm_cmpneq_ps(det, zero)));
+        let az = _mm_mul_ps(sz, azk);
+        let bz = _mm_mul_ps(sz, bzk);
+        let cz = _mm_mul_ps(sz, czk);
+        let ts = _mm_add_ps(_mm_add_ps(_mm_mul_ps(e0, az), _mm_mul_ps(e1, bz)), _mm_mul_ps(e2, cz));
+        // Behind the origin: det and t_scaled of opposite signs (or t_scaled 0).
+        let behind = _mm_or_ps(_mm_and_ps(_mm_cmpgt_ps(det, zero), _mm_cmple_ps(ts, zero)), _mm_and_ps(_mm_cmplt_ps(det, zero), _mm_cmpge_ps(ts, zero)));
+        ok = _mm_andnot_ps(behind, ok);
+        let mut mask = _mm_movemask_ps(ok) as u32 & !any_zero;
+        if mask != 0 {
+            let inv = _mm_div_ps(_mm_set1_ps(1.0), det);
+            let t = _mm_mul_ps(ts, inv);
+            let in_range = _mm_and_ps(_mm_cmpgt_ps(t, _mm_set1_ps(tmin)), _mm_cmple_ps(t, _mm_set1_ps(tmax)));
+            mask &= _mm_movemask_ps(in_range) as u32;
+            let (mut tt, mut uu, mut vv) = ([0.0f32; WIDTH], [0.0f32; WIDTH], [0.0f32; WIDTH]);
+            _mm_storeu_ps(tt.as_mut_ptr(), t);
+            _mm_storeu_ps(uu.as_mut_ptr(), _mm_mul_ps(e1, inv));
+            _mm_storeu_ps(vv.as_mut_ptr(), _mm_mul_ps(e2, inv));
+            for lane in 0..WIDTH {
+                out[lane] = LaneHit { t: tt[lane], u: uu[lane], v: vv[lane] };
+            }
+        }
+        // Lanes with an exact zero edge function: the scalar test decides (in f64).
+        let mut z = any_zero;
+        while z != 0 {
+            let lane = z.trailing_zeros() as usize;
+            z &= z - 1;
+            if let Some((t, u, v)) = scalar_lane(g, lane, rt, tmin, tmax) {
+                out[lane] = LaneHit { t, u, v };
+                mask |= 1 << lane;
+            }
+        }
+        mask
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = sh;
+        let mut mask = 0;
+        for lane in 0..WIDTH {
+            if let Some((t, u, v)) = scalar_lane(g, lane, rt, tmin, tmax) {
+                out[lane] = LaneHit { t, u, v };
+                mask |= 1 << lane;
+            }
+        }
+        mask
+    }
+}
+
+#[inline]
+fn scalar_lane(g: &TriGroup, lane: usize, rt: &RayTransform, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    let p = |k: usize| Vec3::new(g.v[k][0][lane], g.v[k][1][lane], g.v[k][2][lane]);
+    intersect_triangle(rt, p(0), p(1), p(2), tmin, tmax)
+}
