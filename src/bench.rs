@@ -366,7 +366,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 built.build_seconds * 1e3,
                 mem / (1024.0 * 1024.0),
                 mem / prims.max(1) as f64,
-                cells.iter().map(|c| format!("{c:.2}")).collect::<Vec<_>>().join(" | ")
+                cells.iter().map(|c| if *c < 0.1 { format!("{c:.4}") } else { format!("{c:.2}") }).collect::<Vec<_>>().join(" | ")
             );
         }
         #[cfg(has_embree)]
