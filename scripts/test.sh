@@ -13,3 +13,6 @@ echo "== test suite with Embree hidden (PATHTRACER_NO_EMBREE=1) =="
 # The BVH-vs-brute oracle test touches no Embree code and takes two minutes,
 # so this second pass skips it; everything else runs again.
 PATHTRACER_NO_EMBREE=1 CARGO_TARGET_DIR=target/no-embree cargo test --release -- --skip native_bvh_matches_brute_force
+
+echo "== validation harness, quick tier (Mitsuba 3 references) =="
+bash validation/run quick

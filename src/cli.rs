@@ -31,6 +31,15 @@ pub struct Cli {
 pub enum Command {
     /// Time BVH builds and ray throughput per backend, and print a table.
     Bench(crate::bench::BenchArgs),
+    /// Write the loaded scene (camera placed, lights merged) as scene.json + OBJ
+    /// meshes for the validation harness's reference-renderer exporters.
+    Export {
+        #[command(flatten)]
+        render: RenderArgs,
+        /// Output folder
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+    },
     /// Error of OpenEXR images against a reference: relMSE and relative bias.
     Compare {
         /// The reference image (linear OpenEXR)
@@ -139,6 +148,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Bench(b)) => crate::bench::run(&b),
         Some(Command::Compare { reference, images }) => compare(&reference, &images),
+        Some(Command::Export { render, out }) => run_export(&render, &out),
         None if no_arguments => {
             // The demo render: CS184's defaults (1 spp, direct light only)
             // would give a noisy, flat picture of the built-in scene.
@@ -186,16 +196,7 @@ pub fn load_scene(path: Option<&Path>) -> Result<Scene> {
 
 fn run_render(a: &RenderArgs) -> Result<()> {
     // Validate every flag before doing any work.
-    let (width, height) = match &a.resolution {
-        None => (DEFAULT_WIDTH, DEFAULT_HEIGHT),
-        Some(v) => {
-            let r: Vec<u32> = parse_pair(v, "-r")?;
-            if r[0] == 0 || r[1] == 0 || r[0] > 16384 || r[1] > 16384 {
-                crate::bail!("-r {} {}: width and height must be between 1 and 16384", r[0], r[1]);
-            }
-            (r[0], r[1])
-        }
-    };
+    let (width, height) = frame_size(a)?;
     let spp = a.spp.unwrap_or(1);
     if spp == 0 || spp > 1 << 20 {
         crate::bail!("-s {spp}: samples per pixel must be between 1 and 1048576");
@@ -253,17 +254,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let threads = init_threads(a.threads)?;
 
     let scene = load_scene(a.scene.as_deref())?;
-    let mut camera = Camera::from_scene(&scene);
-    if a.resolution.is_some() {
-        if a.keep_fov {
-            camera.resize_keep_fov(width, height);
-        } else {
-            camera.set_screen_size(width, height);
-        }
-    }
-    if let Some(c) = &a.camera {
-        camera.load_settings(c)?;
-    }
+    let camera = setup_camera(a, &scene, width, height)?;
     let output = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
     if let Some(p) = &a.write_camera {
         write_text_atomically(p, &camera.to_settings())?;
@@ -330,6 +321,50 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         threads,
         written.join(", ")
     );
+    Ok(())
+}
+
+/// The frame size from `-r` (800x600 without it).
+fn frame_size(a: &RenderArgs) -> Result<(u32, u32)> {
+    match &a.resolution {
+        None => Ok((DEFAULT_WIDTH, DEFAULT_HEIGHT)),
+        Some(v) => {
+            let r: Vec<u32> = parse_pair(v, "-r")?;
+            if r[0] == 0 || r[1] == 0 || r[0] > 16384 || r[1] > 16384 {
+                crate::bail!("-r {} {}: width and height must be between 1 and 16384", r[0], r[1]);
+            }
+            Ok((r[0], r[1]))
+        }
+    }
+}
+
+/// CS184's camera placement, then `-r` (crop, or scale with --keep-fov), then `-c`.
+fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32) -> Result<Camera> {
+    let mut camera = Camera::from_scene(scene);
+    if a.resolution.is_some() {
+        if a.keep_fov {
+            camera.resize_keep_fov(width, height);
+        } else {
+            camera.set_screen_size(width, height);
+        }
+    }
+    if let Some(c) = &a.camera {
+        camera.load_settings(c)?;
+        // The frame size comes from -r (or 800x600), not from the file.
+        camera.screen_w = width;
+        camera.screen_h = height;
+    }
+    Ok(camera)
+}
+
+fn run_export(a: &RenderArgs, out: &Path) -> Result<()> {
+    let (width, height) = frame_size(a)?;
+    let scene = load_scene(a.scene.as_deref())?;
+    check_materials(&scene)?;
+    let camera = setup_camera(a, &scene, width, height)?;
+    let lights = Lights::from_scene(&scene)?;
+    crate::export::export(&scene, &camera, &lights, out)?;
+    println!("{}: exported {} shapes and {} lights to {}", scene.name, scene.shapes.len(), lights.lights.len(), out.display());
     Ok(())
 }
 

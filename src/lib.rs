@@ -6,6 +6,7 @@ pub mod bench;
 pub mod camera;
 pub mod cli;
 pub mod error;
+pub mod export;
 pub mod geometry;
 pub mod image_io;
 pub mod light;

@@ -108,7 +108,19 @@ impl Light {
             Light::Point { position, intensity } => {
                 let d = *position - p;
                 let r2 = d.length_squared();
-                (r2 > 0.0).then(|| LightSample { wi: d / r2.sqrt(), value: *intensity / r2, pdf: 1.0, target: Target::Point(*position) })
+                // The shadow ray stops short of the light: by 32 ulps of its
+                // position, as for area lights, and by at least 2^-13 of the
+                // distance. A point light sitting on a surface (CBempty's lies in
+                // the plane of its emissive quad) is then not shadowed by that
+                // surface, whatever the rounding of a grazing shadow ray; Mitsuba
+                // and Cycles stop short by a similar relative margin.
+                (r2 > 0.0).then(|| {
+                    let dist = r2.sqrt();
+                    let wi = d / dist;
+                    let near = offset_ray_origin(*position, -wi, position.abs().max_element());
+                    let target = if (*position - near).length() < dist / 8192.0 { *position - wi * (dist / 8192.0) } else { near };
+                    LightSample { wi, value: *intensity / r2, pdf: 1.0, target: Target::Point(target) }
+                })
             }
             Light::Directional { to_light, irradiance } => Some(LightSample { wi: *to_light, value: *irradiance, pdf: 1.0, target: Target::Infinite }),
             Light::Hemisphere { radiance } => {

@@ -1,0 +1,62 @@
+"""Statistical verdicts for an image against a reference (../shared/notes/validation.md §5).
+
+* Per pixel-channel Welch z: z = (x - r) / sqrt(var_x + var_r), both variances of the mean.
+  Family-wise alpha 0.01, Šidák-corrected over all pixel-channels; the image passes when at
+  least 99.75 % of pixel-channels pass (Mitsuba's rule).
+* Global mean test: Z = (sum x - sum r) / sqrt(sum var_x + sum var_r) must satisfy
+  |Z| <= z(alpha = 0.01): it catches a small uniform bias that no single pixel shows. (The
+  sum of per-pixel z over sqrt(N) is reported too, but not used: path-tracing samples are
+  right-skewed, so a pixel's sample variance is usually too small exactly when its mean is
+  too low, and the summed z drifts negative on a correct renderer. Summing the pixels first
+  lets the central limit theorem work across pixels.)
+* Where both variances are 0 (black background, directly seen emitters) the values must match
+  to 1e-5 relative.
+* relMSE (eps 0.01) and SMAPE for the report.
+"""
+from statistics import NormalDist
+
+import numpy as np
+
+ALPHA = 0.01
+PASS_FRACTION = 0.9975
+
+
+def verdict(x, var_x, r, var_r):
+    x, var_x, r, var_r = (np.asarray(a, dtype=np.float64) for a in (x, var_x, r, var_r))
+    n = x.size
+    alpha_pix = 1.0 - (1.0 - ALPHA) ** (1.0 / n)
+    z_pix = NormalDist().inv_cdf(1.0 - alpha_pix / 2.0)
+    z_glob_crit = NormalDist().inv_cdf(1.0 - ALPHA / 2.0)
+    var = var_x + var_r
+    noisy = var > 0
+    z = np.zeros_like(x)
+    z[noisy] = (x[noisy] - r[noisy]) / np.sqrt(var[noisy])
+    exact_ok = np.abs(x - r) <= 1e-5 * np.maximum(np.abs(r), 1e-6)
+    ok = np.where(noisy, np.abs(z) <= z_pix, exact_ok)
+    frac = float(ok.mean())
+    z_sum = float(z[noisy].sum() / np.sqrt(max(noisy.sum(), 1)))
+    z_glob = float((x.sum() - r.sum()) / np.sqrt(max(var.sum(), 1e-300)))
+    rel_mse = float(np.mean((x - r) ** 2 / (r * r + 1e-2)))
+    denom = np.abs(x) + np.abs(r)
+    smape = float(np.mean(np.where(denom > 0, 2 * np.abs(x - r) / np.where(denom > 0, denom, 1), 0)))
+    mean_x, mean_r = float(x.mean()), float(r.mean())
+    se_mean = float(np.sqrt(var.sum()) / n)
+    return {
+        "pixel_channels": int(n),
+        "alpha": ALPHA,
+        "z_pixel_critical": z_pix,
+        "pass_fraction": frac,
+        "pixel_test_passed": frac >= PASS_FRACTION,
+        "global_z": z_glob,
+        "summed_pixel_z": z_sum,
+        "global_z_critical": z_glob_crit,
+        "global_test_passed": abs(z_glob) <= z_glob_crit,
+        "mean": mean_x,
+        "reference_mean": mean_r,
+        "relative_mean_difference": (mean_x - mean_r) / mean_r if mean_r else None,
+        "se_of_mean_difference": se_mean,
+        "rel_mse": rel_mse,
+        "smape": smape,
+        "passed": bool(frac >= PASS_FRACTION and abs(z_glob) <= z_glob_crit),
+        "z_image": z,
+    }
