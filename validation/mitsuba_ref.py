@@ -90,6 +90,7 @@ def main():
     ap.add_argument("--spp", type=int, required=True, help="samples per pixel per render")
     ap.add_argument("--renders", type=int, default=16, help="independent renders (for the variance)")
     ap.add_argument("--out", required=True, help="output prefix: <out>.exr, <out>_var.exr, <out>.json")
+    ap.add_argument("--ladder", default="", help="also time single renders at these spp (comma-separated): <out>_spp<N>.exr")
     args = ap.parse_args()
     import time
 
@@ -111,6 +112,14 @@ def main():
     mi.Bitmap(var_of_mean.astype(np.float32)).write(args.out + "_var.exr")
     with open(args.out + ".json", "w") as f:
         json.dump({"renderer": f"mitsuba {mi.__version__} scalar_rgb", "spp": args.spp * args.renders, "renders": args.renders, "seconds": seconds}, f)
+    ladder = []
+    for n in [int(x) for x in args.ladder.split(",") if x]:
+        t0 = time.time()
+        img = np.array(mi.render(scene, spp=n, seed=1000 + n), dtype=np.float32)
+        ladder.append({"spp": n, "seconds": time.time() - t0, "file": f"{args.out}_spp{n}.exr"})
+        mi.Bitmap(img).write(ladder[-1]["file"])
+    with open(args.out + "_ladder.json", "w") as f:
+        json.dump(ladder, f)
     print(f"mitsuba: {args.renders} x {args.spp} spp in {seconds:.1f} s")
 
 

@@ -24,9 +24,10 @@ sys.path.insert(0, HERE)
 import stats  # noqa: E402
 
 TIERS = {
-    # name: (width, height, our spp, reference spp per render, reference renders, cases)
-    "quick": (64, 48, 256, 128, 16, [("CBspheres_lambertian", None, 1), ("CBspheres_lambertian", None, 5), ("CBempty", "CBempty.dae", 3)]),
-    "full": (256, 192, 1024, 512, 16, [("CBspheres_lambertian", None, 1), ("CBspheres_lambertian", None, 5), ("CBempty", "CBempty.dae", 3), ("CBbunny", "CBbunny.dae", 5)]),
+    # name: (width, height, our spp, reference spp per render, reference renders, spp ladder for
+    # the error-vs-time curves, cases)
+    "quick": (64, 48, 256, 128, 16, [4, 16, 64], [("CBspheres_lambertian", None, 1), ("CBspheres_lambertian", None, 5), ("CBempty", "CBempty.dae", 3)]),
+    "full": (256, 192, 1024, 512, 16, [4, 16, 64, 256], [("CBspheres_lambertian", None, 1), ("CBspheres_lambertian", None, 5), ("CBempty", "CBempty.dae", 3), ("CBbunny", "CBbunny.dae", 5)]),
 }
 
 
@@ -77,7 +78,7 @@ def main():
     ap.add_argument("--pathtracer", default=os.path.join(ROOT, "target", "release", "pathtracer"))
     ap.add_argument("--out", default=os.path.join(HERE, "out"))
     args = ap.parse_args()
-    w, h, spp, ref_spp, ref_renders, cases = TIERS[args.tier]
+    w, h, spp, ref_spp, ref_renders, ladder, cases = TIERS[args.tier]
     out = args.out
     os.makedirs(os.path.join(out, "cache"), exist_ok=True)
     backends = ["native"]
@@ -102,9 +103,10 @@ def main():
         sh([args.pathtracer, "export", *scene_args, *view, "--out", os.path.join(folder, "scene")])
         with open(os.path.join(folder, "scene", "scene.json"), "rb") as f:
             key = hashlib.sha256(f.read() + b"".join(open(os.path.join(folder, "scene", p), "rb").read() for p in sorted(os.listdir(os.path.join(folder, "scene"))) if p.endswith(".obj"))).hexdigest()[:16]
-        ref = os.path.join(out, "cache", f"mitsuba_{key}_m{m}_{ref_spp}x{ref_renders}")
-        if not os.path.exists(ref + ".exr"):
-            sh([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), os.path.join(folder, "scene"), "--max-depth", str(m), "--spp", str(ref_spp), "--renders", str(ref_renders), "--out", ref])
+        lad = ",".join(str(n) for n in ladder)
+        ref = os.path.join(out, "cache", f"mitsuba_{key}_m{m}_{ref_spp}x{ref_renders}_l{lad.replace(',', '-')}")
+        if not os.path.exists(ref + "_ladder.json"):
+            sh([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), os.path.join(folder, "scene"), "--max-depth", str(m), "--spp", str(ref_spp), "--renders", str(ref_renders), "--out", ref, "--ladder", lad])
         r, var_r = read_exr(ref + ".exr"), read_exr(ref + "_var.exr")
         with open(ref + ".json") as f:
             ref_meta = json.load(f)
@@ -119,14 +121,77 @@ def main():
             v = stats.verdict(x, var_x, r, var_r)
             write_zmap(os.path.join(folder, f"{backend}_z.png"), v.pop("z_image"))
             v.update({"case": case, "scene": name, "max_depth": m, "backend": backend, "reference": ref_meta["renderer"], "spp": spp, "seconds": seconds, "reference_spp": ref_meta["spp"], "reference_seconds": ref_meta["seconds"], "size": [w, h]})
+            v["curve"] = error_curve(args.pathtracer, scene_args, view, m, backend, ladder, folder, r)
             results.append(v)
             print(f"{case} {backend} vs mitsuba: {'PASS' if v['passed'] else 'FAIL'} pixels {v['pass_fraction']*100:.2f}% global z {v['global_z']:+.2f} relMSE {v['rel_mse']:.2e}")
+        with open(ref + "_ladder.json") as f:
+            mcurve = [{"spp": p["spp"], "seconds": p["seconds"], "rel_mse": float(np.mean((read_exr(p["file"]) - r) ** 2 / (r * r + 1e-2)))} for p in json.load(f)]
+        floor = float(np.mean(var_r / (r * r + 1e-2)))
+        for res in results:
+            if res["case"] == case:
+                res["mitsuba_curve"] = mcurve
+                res["reference_noise_floor"] = floor
+                res["equal_time_rel_mse_ratio"] = equal_time_ratio(res["curve"], mcurve)
     summary = {"tier": args.tier, "pathtracer": info.strip(), "results": results, "all_passed": all(r["passed"] for r in results)}
     with open(os.path.join(out, "summary.json"), "w") as f:
         json.dump(summary, f, indent=2)
     write_report(out, summary)
     print(f"wrote {os.path.join(out, 'report.html')} and summary.json: {'all passed' if summary['all_passed'] else 'FAILURES'}")
     sys.exit(0 if summary["all_passed"] else 1)
+
+
+def error_curve(pt, scene_args, view, m, backend, ladder, folder, r):
+    """Our relMSE against the reference at each spp of the ladder, with the render time
+    our summary line reports (process start and scene loading excluded, as for Mitsuba)."""
+    curve = []
+    for n in ladder:
+        exr = os.path.join(folder, f"{backend}_spp{n}.exr")
+        text = sh([pt, *scene_args, *view, "-s", str(n), "-m", str(m), "--backend", backend, "--seed", str(100 + n), "-f", os.path.join(folder, f"{backend}_spp{n}.png"), "--exr", exr])
+        seconds = float(text.split("| render ")[1].split(" s")[0])
+        x = read_exr(exr)
+        curve.append({"spp": n, "seconds": seconds, "rel_mse": float(np.mean((x - r) ** 2 / (r * r + 1e-2)))})
+    return curve
+
+
+def equal_time_ratio(ours, theirs):
+    """relMSE(ours) / relMSE(theirs) at equal render time: both curves interpolated
+    log-log at the geometric mean of the overlapping time range. None without overlap."""
+    def at(curve, t):
+        pts = sorted((p["seconds"], p["rel_mse"]) for p in curve)
+        for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
+            if t0 <= t <= t1 and t1 > t0 and e0 > 0 and e1 > 0:
+                a = (np.log(t) - np.log(t0)) / (np.log(t1) - np.log(t0))
+                return float(np.exp(np.log(e0) + a * (np.log(e1) - np.log(e0))))
+        return None
+    lo = max(min(p["seconds"] for p in ours), min(p["seconds"] for p in theirs))
+    hi = min(max(p["seconds"] for p in ours), max(p["seconds"] for p in theirs))
+    if not (hi > lo > 0):
+        return None
+    t = float(np.sqrt(lo * hi))
+    a, b = at(ours, t), at(theirs, t)
+    return {"seconds": t, "ratio": a / b} if a and b else None
+
+
+def svg_curves(series, width=360, height=240):
+    """A log-log plot of relMSE against seconds, as inline SVG."""
+    pts = [(p["seconds"], p["rel_mse"]) for _, c, _ in series for p in c if p["seconds"] > 0 and p["rel_mse"] > 0]
+    if not pts:
+        return ""
+    lx = [np.log10(t) for t, _ in pts]
+    ly = [np.log10(e) for _, e in pts]
+    x0, x1, y0, y1 = min(lx) - 0.1, max(lx) + 0.1, min(ly) - 0.1, max(ly) + 0.1
+    px = lambda v: 40 + (np.log10(v) - x0) / (x1 - x0) * (width - 50)
+    py = lambda v: height - 30 - (np.log10(v) - y0) / (y1 - y0) * (height - 40)
+    parts = [f'<svg width="{width}" height="{height}" class="curve"><rect x="40" y="10" width="{width-50}" height="{height-40}" fill="none" stroke="#999"/>',
+             f'<text x="{width/2}" y="{height-5}" font-size="11">render time (s, log)</text><text x="2" y="20" font-size="11">relMSE</text>',
+             f'<text x="40" y="{height-18}" font-size="9">{10**x0:.2g}</text><text x="{width-40}" y="{height-18}" font-size="9">{10**x1:.2g}</text>',
+             f'<text x="2" y="{height-30}" font-size="9">{10**y0:.1e}</text><text x="2" y="40" font-size="9">{10**y1:.1e}</text>']
+    for i, (name, c, colour) in enumerate(series):
+        line = " ".join(f"{px(p['seconds']):.1f},{py(p['rel_mse']):.1f}" for p in sorted(c, key=lambda p: p["seconds"]) if p["seconds"] > 0 and p["rel_mse"] > 0)
+        parts.append(f'<polyline points="{line}" fill="none" stroke="{colour}" stroke-width="2"/>')
+        parts.append(f'<text x="{width-110}" y="{25+14*i}" font-size="11" fill="{colour}">{html.escape(name)}</text>')
+    parts.append("</svg>")
+    return "".join(parts)
 
 
 def write_report(out, summary):
@@ -140,15 +205,34 @@ def write_report(out, summary):
                 case=html.escape(c), backend=r["backend"], ref=html.escape(r["reference"]), cls="pass" if r["passed"] else "fail",
                 verdict="pass" if r["passed"] else "FAIL", pf=100 * r["pass_fraction"], gz=r["global_z"], rd=100 * (r["relative_mean_difference"] or 0),
                 rm=r["rel_mse"], sm=r["smape"], t=r["seconds"], c=html.escape(c)))
+    curves = []
+    eff_rows = []
+    for case in sorted({r["case"] for r in summary["results"]}):
+        rs = [r for r in summary["results"] if r["case"] == case]
+        colours = {"native": "#d62728", "embree": "#1f77b4"}
+        series = [(r["backend"], r["curve"], colours.get(r["backend"], "#333")) for r in rs] + [("mitsuba", rs[0]["mitsuba_curve"], "#2ca02c")]
+        curves.append(f"<div class='plot'><h3>{html.escape(case)}</h3>{svg_curves(series)}</div>")
+        for name, c, _ in series:
+            best = max(c, key=lambda p: p["spp"])
+            eff_rows.append(f"<tr><td>{html.escape(case)}</td><td>{name}</td><td>{best['spp']}</td><td>{best['seconds']:.3f}</td><td>{best['rel_mse']:.2e}</td><td>{1.0/(best['rel_mse']*best['seconds']):.3g}</td></tr>")
+        for r in rs:
+            eq = r.get("equal_time_rel_mse_ratio")
+            eff_rows.append(f"<tr><td>{html.escape(case)}</td><td>{r['backend']} ÷ mitsuba at equal time</td><td colspan='4'>{'%.2f at %.3f s' % (eq['ratio'], eq['seconds']) if eq else 'no overlapping times'}</td></tr>")
     doc = f"""<!doctype html><html><head><meta charset="utf-8"><title>pathtracer validation ({summary['tier']})</title>
 <style>body{{font-family:sans-serif}} table{{border-collapse:collapse}} td,th{{border:1px solid #999;padding:3px 6px;text-align:right}}
-img{{width:128px;image-rendering:pixelated}} .pass{{background:#cfc}} .fail{{background:#fcc}}</style></head><body>
+img{{width:128px;image-rendering:pixelated}} .pass{{background:#cfc}} .fail{{background:#fcc}} .plot{{display:inline-block}}</style>
+<script>window.addEventListener("load", () => {{ const imgs = [...document.images];
+document.body.dataset.images = imgs.length; document.body.dataset.imagesOk = imgs.filter(i => i.complete && i.naturalWidth > 0).length; }});</script></head><body>
 <h1>pathtracer validation: {summary['tier']} tier</h1>
 <p>{html.escape(summary['pathtracer'])}. Verdict: per pixel-channel Welch z-test (alpha 0.01, Šidák), pass at &ge; 99.75 % of
 pixel-channels, plus a global mean test (|Z| &le; 2.58). z-map: blue z &le; -4, white 0, red z &ge; 4.</p>
 <table id="verdicts"><tr><th>case</th><th>backend</th><th>reference</th><th>verdict</th><th>pixels passing</th><th>global Z</th><th>mean diff</th>
 <th>relMSE</th><th>SMAPE</th><th>our time</th><th>ours</th><th>reference</th><th>z-map</th></tr>
-{''.join(rows)}</table></body></html>"""
+{''.join(rows)}</table>
+<h2>Error against time</h2><p>relMSE against the reference (reference noise floor included: see summary.json) for the spp ladder; render time excludes process start.</p>
+{''.join(curves)}
+<h2>Efficiency</h2><table id="efficiency"><tr><th>case</th><th>renderer</th><th>spp</th><th>seconds</th><th>relMSE</th><th>1/(relMSE·s)</th></tr>{''.join(eff_rows)}</table>
+</body></html>"""
     with open(os.path.join(out, "report.html"), "w") as f:
         f.write(doc)
 
