@@ -232,6 +232,205 @@ impl Bvh4 {
     }
 }
 
+/// Four coherent rays traversed together: one node fetch and one 4-ray box
+/// test per child serve the whole packet; leaves are intersected ray by ray
+/// with the same group test as single rays. The tie rule makes the closest
+/// hit independent of the visiting order, so answers equal single-ray ones.
+struct Packet {
+    o: [[f32; WIDTH]; 3],
+    inv: [[f32; WIDTH]; 3],
+    /// Per axis, lanes whose direction has the sign bit set (all ones) or not.
+    neg: [[u32; WIDTH]; 3],
+    tmin: [f32; WIDTH],
+    tmax: [f32; WIDTH],
+    active: u32,
+}
+
+impl Packet {
+    fn new(rays: &[Ray]) -> Self {
+        let mut p = Packet { o: [[0.0; WIDTH]; 3], inv: [[1.0; WIDTH]; 3], neg: [[0; WIDTH]; 3], tmin: [0.0; WIDTH], tmax: [f32::NEG_INFINITY; WIDTH], active: 0 };
+        for (l, r) in rays.iter().enumerate() {
+            if !r.is_valid() {
+                continue;
+            }
+            p.active |= 1 << l;
+            for a in 0..3 {
+                p.o[a][l] = r.origin[a];
+                p.inv[a][l] = 1.0 / r.dir[a];
+                p.neg[a][l] = if r.dir[a].is_sign_negative() { u32::MAX } else { 0 };
+            }
+            p.tmin[l] = r.tmin;
+            p.tmax[l] = r.tmax;
+        }
+        p
+    }
+
+    /// Which active lanes enter child `c` of `n`, and the smallest entry distance among them.
+    #[inline(always)]
+    fn test_child(&self, n: &Node4, c: usize) -> (u32, f32) {
+        #[cfg(target_arch = "x86_64")]
+        unsafe {
+            use std::arch::x86_64::*;
+            let mut t0 = _mm_loadu_ps(self.tmin.as_ptr());
+            let mut t1 = _mm_loadu_ps(self.tmax.as_ptr());
+            let scale = _mm_set1_ps(ROBUST_SCALE);
+            for a in 0..3 {
+                let bmin = _mm_set1_ps(n.bounds[a][c]);
+                let bmax = _mm_set1_ps(n.bounds[3 + a][c]);
+                let neg = _mm_castsi128_ps(_mm_loadu_si128(self.neg[a].as_ptr() as *const __m128i));
+                // Per lane: near plane = max for negative directions, else min.
+                let lo = _mm_or_ps(_mm_and_ps(neg, bmax), _mm_andnot_ps(neg, bmin));
+                let hi = _mm_or_ps(_mm_and_ps(neg, bmin), _mm_andnot_ps(neg, bmax));
+                let o = _mm_loadu_ps(self.o[a].as_ptr());
+                let inv = _mm_loadu_ps(self.inv[a].as_ptr());
+                let tn = _mm_mul_ps(_mm_sub_ps(lo, o), inv);
+                let tf = _mm_mul_ps(_mm_mul_ps(_mm_sub_ps(hi, o), inv), scale);
+                t0 = _mm_max_ps(tn, t0);
+                t1 = _mm_min_ps(tf, t1);
+            }
+            let mask = _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32 & self.active;
+            let mut t = [0.0f32; WIDTH];
+            _mm_storeu_ps(t.as_mut_ptr(), t0);
+            let mut near = f32::INFINITY;
+            for (l, &tl) in t.iter().enumerate() {
+                if mask & (1 << l) != 0 && tl < near {
+                    near = tl;
+                }
+            }
+            (mask, near)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let (mut mask, mut near) = (0, f32::INFINITY);
+            for l in 0..WIDTH {
+                if self.active & (1 << l) == 0 {
+                    continue;
+                }
+                let (mut t0, mut t1) = (self.tmin[l], self.tmax[l]);
+                for a in 0..3 {
+                    let neg = self.neg[a][l] != 0;
+                    let (lo, hi) = if neg { (n.bounds[3 + a][c], n.bounds[a][c]) } else { (n.bounds[a][c], n.bounds[3 + a][c]) };
+                    let tn = (lo - self.o[a][l]) * self.inv[a][l];
+                    let tf = (hi - self.o[a][l]) * self.inv[a][l] * ROBUST_SCALE;
+                    if tn > t0 {
+                        t0 = tn;
+                    }
+                    if tf < t1 {
+                        t1 = tf;
+                    }
+                }
+                if t0 <= t1 {
+                    mask |= 1 << l;
+                    near = near.min(t0);
+                }
+            }
+            (mask, near)
+        }
+    }
+}
+
+impl Bvh4 {
+    /// Closest hits (`occlusion == false`) or any hits for up to 4 rays. Each
+    /// stack entry carries the lanes that entered it, so a leaf or subtree is
+    /// only tested for the rays that reach it.
+    fn packet(&self, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool], occlusion: bool) {
+        let mut p = Packet::new(rays);
+        if self.root == EMPTY || p.active == 0 {
+            return;
+        }
+        let rts: Vec<RayTransform> = rays.iter().map(|r| RayTransform::new(r.origin, r.dir)).collect();
+        let shears: Vec<Shear> = rts.iter().map(Shear::new).collect();
+        let mut stack = [(0u32, 0.0f32, 0u32); STACK];
+        let mut sp = 0;
+        let (mut cur, mut lanes_in) = (self.root, p.active);
+        loop {
+            let lanes_here = lanes_in & p.active;
+            if lanes_here != 0 && cur & LEAF_BIT != 0 {
+                let leaf = &self.leaves[(cur & !LEAF_BIT) as usize];
+                let mut lanes = lanes_here;
+                while lanes != 0 {
+                    let l = lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
+                    let mut best = hits[l];
+                    let mut tmax = p.tmax[l];
+                    let mut found = false;
+                    self.leaf(leaf, &rays[l], &rts[l], &shears[l], tmax, &mut |i, t, u, v| {
+                        found = true;
+                        if occlusion {
+                            return true;
+                        }
+                        let h = self.prims[i as usize].hit(t, u, v);
+                        if closer(h, &best) {
+                            tmax = t;
+                            best = Some(h);
+                        }
+                        false
+                    });
+                    if occlusion {
+                        if found {
+                            occluded[l] = true;
+                            p.active &= !(1 << l);
+                        }
+                    } else {
+                        hits[l] = best;
+                        p.tmax[l] = tmax;
+                    }
+                }
+                if p.active == 0 {
+                    return;
+                }
+            } else if lanes_here != 0 {
+                let node = &self.nodes[cur as usize];
+                let mut next: [(u32, f32, u32); WIDTH] = [(0, 0.0, 0); WIDTH];
+                let mut n = 0;
+                let saved = p.active;
+                p.active = lanes_here;
+                for c in 0..WIDTH {
+                    if node.child[c] == EMPTY {
+                        continue;
+                    }
+                    let (mask, near) = p.test_child(node, c);
+                    if mask != 0 {
+                        next[n] = (node.child[c], near, mask);
+                        n += 1;
+                    }
+                }
+                p.active = saved;
+                if n > 0 {
+                    let h = &mut next[..n];
+                    for i in 1..n {
+                        let mut j = i;
+                        while j > 0 && h[j - 1].1 < h[j].1 {
+                            h.swap(j - 1, j);
+                            j -= 1;
+                        }
+                    }
+                    for &e in &h[..n - 1] {
+                        stack[sp] = e;
+                        sp += 1;
+                    }
+                    (cur, lanes_in) = (h[n - 1].0, h[n - 1].2);
+                    continue;
+                }
+            }
+            // Pop, skipping subtrees every one of their rays has already passed.
+            loop {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                let (code, dist, mask) = stack[sp];
+                let live = mask & p.active;
+                let far = (0..WIDTH).filter(|l| live & (1 << l) != 0).map(|l| p.tmax[l]).fold(f32::NEG_INFINITY, f32::max);
+                if live != 0 && dist <= far {
+                    (cur, lanes_in) = (code, live);
+                    break;
+                }
+            }
+        }
+    }
+}
+
 impl Traversal for Bvh4 {
     fn name(&self) -> &'static str {
         "native"
@@ -276,6 +475,24 @@ impl Traversal for Bvh4 {
             true
         });
         hit
+    }
+
+    fn intersect_coherent(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), hits.len());
+        let mut unused = [false; WIDTH];
+        for (r, h) in rays.chunks(WIDTH).zip(hits.chunks_mut(WIDTH)) {
+            h.fill(None);
+            self.packet(r, h, &mut unused[..r.len()], false);
+        }
+    }
+
+    fn occluded_coherent(&self, rays: &[Ray], out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len());
+        let mut unused = [None; WIDTH];
+        for (r, o) in rays.chunks(WIDTH).zip(out.chunks_mut(WIDTH)) {
+            o.fill(false);
+            self.packet(r, &mut unused[..r.len()], o, true);
+        }
     }
 }
 
