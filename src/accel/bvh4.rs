@@ -200,14 +200,7 @@ impl Bvh4 {
                 }
                 if n > 0 {
                     let h = &mut hits[..n];
-                    // Insertion sort, farthest first (n <= 4).
-                    for i in 1..n {
-                        let mut j = i;
-                        while j > 0 && h[j - 1].1 < h[j].1 {
-                            h.swap(j - 1, j);
-                            j -= 1;
-                        }
-                    }
+                    sort_far_first(h, |e| e.1);
                     for &e in &h[..n - 1] {
                         stack[sp] = e;
                         sp += 1;
@@ -398,13 +391,7 @@ impl Bvh4 {
                 p.active = saved;
                 if n > 0 {
                     let h = &mut next[..n];
-                    for i in 1..n {
-                        let mut j = i;
-                        while j > 0 && h[j - 1].1 < h[j].1 {
-                            h.swap(j - 1, j);
-                            j -= 1;
-                        }
-                    }
+                    sort_far_first(h, |e| e.1);
                     for &e in &h[..n - 1] {
                         stack[sp] = e;
                         sp += 1;
@@ -492,6 +479,19 @@ impl Traversal for Bvh4 {
         for (r, o) in rays.chunks(WIDTH).zip(out.chunks_mut(WIDTH)) {
             o.fill(false);
             self.packet(r, &mut unused[..r.len()], o, true);
+        }
+    }
+}
+
+/// Insertion sort of at most 4 hit children by entry distance, farthest
+/// first: pushed in that order, the nearest is visited next.
+#[inline(always)]
+fn sort_far_first<T: Copy>(h: &mut [T], dist: impl Fn(&T) -> f32) {
+    for i in 1..h.len() {
+        let mut j = i;
+        while j > 0 && dist(&h[j - 1]) < dist(&h[j]) {
+            h.swap(j - 1, j);
+            j -= 1;
         }
     }
 }
