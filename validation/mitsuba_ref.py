@@ -111,7 +111,8 @@ def main():
     mi.Bitmap(mean.astype(np.float32)).write(args.out + ".exr")
     mi.Bitmap(var_of_mean.astype(np.float32)).write(args.out + "_var.exr")
     with open(args.out + ".json", "w") as f:
-        json.dump({"renderer": f"mitsuba {mi.__version__} scalar_rgb", "spp": args.spp * args.renders, "renders": args.renders, "seconds": seconds}, f)
+        json.dump({"renderer": f"mitsuba {mi.__version__} scalar_rgb", "spp": args.spp * args.renders, "renders": args.renders, "seconds": seconds,
+                   "image_means": [float(i.mean()) for i in images]}, f)
     ladder = []
     for n in [int(x) for x in args.ladder.split(",") if x]:
         t0 = time.time()
