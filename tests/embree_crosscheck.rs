@@ -157,6 +157,9 @@ fn embree_batches_match_single_rays() {
     let embree = common::build(BackendKind::Embree, &scene.shapes);
     let mut rays = camera_rays(&Camera::from_scene(&scene), 64, 48);
     rays.extend(random_rays(&scene, 3000, 5));
+    // The benchmark's shadow rays: from camera hits towards one point.
+    let shadows = pathtracer::bench::shadow_rays(&scene, embree.as_ref(), &camera_rays(&Camera::from_scene(&scene), 64, 48));
+    rays.extend(shadows);
     // Invalid rays inside a batch must not disturb their neighbours.
     rays[7].dir = glam::Vec3::ZERO;
     rays[100].origin.x = f32::NAN;
