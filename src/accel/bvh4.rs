@@ -41,8 +41,8 @@ struct TriGroup {
 
 #[derive(Clone, Copy, Debug)]
 struct Leaf {
-    /// Triangle groups `groups[group..group+n_groups]`; their lanes map to
-    /// `lanes[4*group ..]` (the `Prim` each lane came from, or none).
+    /// Triangle groups `groups[group..group+n_groups]`; lane i of group g
+    /// is the triangle `ids[4*g + i]` (geometry, primitive), or padding.
     group: u32,
     n_groups: u32,
     /// Spheres: `spheres[sphere..sphere+n_spheres]`.
@@ -54,10 +54,9 @@ pub struct Bvh4 {
     nodes: Vec<Node4>,
     leaves: Vec<Leaf>,
     groups: Vec<TriGroup>,
-    /// Per group lane: index into `prims` or `EMPTY` for padding.
-    lanes: Vec<u32>,
-    spheres: Vec<u32>,
-    prims: Vec<Prim>,
+    /// Per group lane: (geometry id, primitive id), geometry `EMPTY` for padding.
+    ids: Vec<[u32; 2]>,
+    spheres: Vec<Prim>,
     /// The root: a node, or a leaf when the scene is tiny.
     root: u32,
 }
@@ -65,17 +64,17 @@ pub struct Bvh4 {
 impl Bvh4 {
     pub fn build(shapes: &[Shape]) -> Self {
         let prims = prims::collect(shapes);
-        let mut b = Bvh4 { nodes: Vec::new(), leaves: Vec::new(), groups: Vec::new(), lanes: Vec::new(), spheres: Vec::new(), prims: Vec::new(), root: EMPTY };
+        let mut b = Bvh4 { nodes: Vec::new(), leaves: Vec::new(), groups: Vec::new(), ids: Vec::new(), spheres: Vec::new(), root: EMPTY };
         let Some((tree, order)) = build_tree(&prims) else { return b };
-        b.prims = order.iter().map(|&i| prims[i as usize]).collect();
-        b.root = b.emit(&tree);
+        let ordered: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
+        b.root = b.emit(&tree, &ordered);
         b
     }
 
     /// Flatten `node` depth-first; returns its child code.
-    fn emit(&mut self, node: &BuildNode) -> u32 {
+    fn emit(&mut self, node: &BuildNode, prims: &[Prim]) -> u32 {
         match node {
-            BuildNode::Leaf { first, count, .. } => self.emit_leaf(*first, *count),
+            BuildNode::Leaf { first, count, .. } => self.emit_leaf(&prims[*first..*first + *count]),
             BuildNode::Interior { .. } => {
                 // Open the largest child until four children (or only leaves) remain.
                 let mut kids: Vec<&BuildNode> = vec![node];
@@ -94,7 +93,7 @@ impl Bvh4 {
                 let idx = self.nodes.len();
                 self.nodes.push(Node4 { bounds: [[f32::INFINITY; WIDTH], [f32::INFINITY; WIDTH], [f32::INFINITY; WIDTH], [f32::NEG_INFINITY; WIDTH], [f32::NEG_INFINITY; WIDTH], [f32::NEG_INFINITY; WIDTH]], child: [EMPTY; WIDTH], _pad: [0; 4] });
                 for (lane, k) in kids.iter().enumerate() {
-                    let code = self.emit(k);
+                    let code = self.emit(k, prims);
                     let b: &Aabb = k.bounds();
                     let n = &mut self.nodes[idx];
                     for a in 0..3 {
@@ -108,22 +107,22 @@ impl Bvh4 {
         }
     }
 
-    fn emit_leaf(&mut self, first: usize, count: usize) -> u32 {
+    fn emit_leaf(&mut self, prims: &[Prim]) -> u32 {
         let group = self.groups.len() as u32;
         let sphere = self.spheres.len() as u32;
-        let tris: Vec<u32> = (first..first + count).filter(|&i| !self.prims[i].is_sphere()).map(|i| i as u32).collect();
-        self.spheres.extend((first..first + count).filter(|&i| self.prims[i].is_sphere()).map(|i| i as u32));
+        let tris: Vec<&Prim> = prims.iter().filter(|p| !p.is_sphere()).collect();
+        self.spheres.extend(prims.iter().filter(|p| p.is_sphere()).copied());
         for chunk in tris.chunks(WIDTH) {
             let mut g = TriGroup { v: [[[0.0; WIDTH]; 3]; 3] };
             for lane in 0..WIDTH {
-                // Padding lanes repeat the first triangle; `lanes` marks them empty.
-                let p = &self.prims[chunk[lane.min(chunk.len() - 1)] as usize];
+                // Padding lanes repeat the first triangle; `ids` marks them empty.
+                let p = chunk[lane.min(chunk.len() - 1)];
                 for k in 0..3 {
                     for a in 0..3 {
                         g.v[k][a][lane] = p.v[k][a];
                     }
                 }
-                self.lanes.push(if lane < chunk.len() { chunk[lane] } else { EMPTY });
+                self.ids.push(if lane < chunk.len() { [p.geom_id(), p.prim_id] } else { [EMPTY, EMPTY] });
             }
             self.groups.push(g);
         }
@@ -132,27 +131,26 @@ impl Bvh4 {
         LEAF_BIT | (self.leaves.len() as u32 - 1)
     }
 
-    /// Intersect a leaf; `visit(prim index, t, u, v)` returns true to stop.
+    /// Intersect a leaf; `visit(hit)` returns true to stop.
     #[inline]
-    fn leaf<F: FnMut(u32, f32, f32, f32) -> bool>(&self, leaf: &Leaf, ray: &Ray, rt: &RayTransform, shear: &Shear, tmax: f32, visit: &mut F) -> bool {
+    fn leaf<F: FnMut(Hit) -> bool>(&self, leaf: &Leaf, ray: &Ray, rt: &RayTransform, shear: &Shear, tmax: f32, visit: &mut F) -> bool {
         for gi in leaf.group..leaf.group + leaf.n_groups {
             let g = &self.groups[gi as usize];
-            let lanes = &self.lanes[gi as usize * WIDTH..gi as usize * WIDTH + WIDTH];
+            let ids = &self.ids[gi as usize * WIDTH..gi as usize * WIDTH + WIDTH];
             let mut out = [LaneHit::default(); WIDTH];
             let mask = intersect_group(g, rt, shear, ray.tmin, tmax, &mut out);
             for lane in 0..WIDTH {
-                if mask & (1 << lane) != 0 && lanes[lane] != EMPTY {
+                if mask & (1 << lane) != 0 && ids[lane][0] != EMPTY {
                     let h = out[lane];
-                    if visit(lanes[lane], h.t, h.u, h.v) {
+                    if visit(Hit { t: h.t, u: h.u, v: h.v, geom_id: ids[lane][0], prim_id: ids[lane][1] }) {
                         return true;
                     }
                 }
             }
         }
-        for &si in &self.spheres[leaf.sphere as usize..(leaf.sphere + leaf.n_spheres) as usize] {
-            let p = &self.prims[si as usize];
+        for p in &self.spheres[leaf.sphere as usize..(leaf.sphere + leaf.n_spheres) as usize] {
             if let Some((t, u, v)) = p.intersect(rt, ray.dir, ray.tmin, tmax) {
-                if visit(si, t, u, v) {
+                if visit(p.hit(t, u, v)) {
                     return true;
                 }
             }
@@ -162,7 +160,7 @@ impl Bvh4 {
 
     /// Front-to-back traversal; `visit` may lower `tmax` and returns true to stop.
     #[inline]
-    fn walk<F: FnMut(u32, f32, f32, f32, &mut f32) -> bool>(&self, ray: &Ray, mut visit: F) {
+    fn walk<F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, mut visit: F) {
         if self.root == EMPTY {
             return;
         }
@@ -178,8 +176,8 @@ impl Bvh4 {
             if cur & LEAF_BIT != 0 {
                 let leaf = &self.leaves[(cur & !LEAF_BIT) as usize];
                 let mut stop = false;
-                self.leaf(leaf, ray, &rt, &shear, tmax, &mut |i, t, u, v| {
-                    stop = visit(i, t, u, v, &mut tmax);
+                self.leaf(leaf, ray, &rt, &shear, tmax, &mut |h| {
+                    stop = visit(h, &mut tmax);
                     stop
                 });
                 if stop {
@@ -347,14 +345,13 @@ impl Bvh4 {
                     let mut best = hits[l];
                     let mut tmax = p.tmax[l];
                     let mut found = false;
-                    self.leaf(leaf, &rays[l], &rts[l], &shears[l], tmax, &mut |i, t, u, v| {
+                    self.leaf(leaf, &rays[l], &rts[l], &shears[l], tmax, &mut |h| {
                         found = true;
                         if occlusion {
                             return true;
                         }
-                        let h = self.prims[i as usize].hit(t, u, v);
                         if closer(h, &best) {
-                            tmax = t;
+                            tmax = h.t;
                             best = Some(h);
                         }
                         false
@@ -431,9 +428,8 @@ impl Traversal for Bvh4 {
         self.nodes.len() * std::mem::size_of::<Node4>()
             + self.leaves.len() * std::mem::size_of::<Leaf>()
             + self.groups.len() * std::mem::size_of::<TriGroup>()
-            + self.lanes.len() * 4
-            + self.spheres.len() * 4
-            + self.prims.len() * std::mem::size_of::<Prim>()
+            + self.ids.len() * 8
+            + self.spheres.len() * std::mem::size_of::<Prim>()
     }
 
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
@@ -441,10 +437,9 @@ impl Traversal for Bvh4 {
             return None;
         }
         let mut best: Option<Hit> = None;
-        self.walk(ray, |i, t, u, v, tmax| {
-            let h = self.prims[i as usize].hit(t, u, v);
+        self.walk(ray, |h, tmax| {
             if closer(h, &best) {
-                *tmax = t;
+                *tmax = h.t;
                 best = Some(h);
             }
             false
@@ -457,7 +452,7 @@ impl Traversal for Bvh4 {
             return false;
         }
         let mut hit = false;
-        self.walk(ray, |_, _, _, _, _| {
+        self.walk(ray, |_, _| {
             hit = true;
             true
         });
