@@ -3,7 +3,7 @@
 //! triangles packed 4 to a group and tested together.
 //!
 //! Every lane performs exactly the scalar operations of `intersect_triangle`
-//! and of the binary BVH's box test, in the same order, so answers are
+//! and of a scalar slab test, in the same order, so answers are
 //! bit-identical to the scalar code (and so to the brute-force oracle). The
 //! SIMD code is SSE2, part of every x86-64 CPU; other targets run the scalar
 //! lane loop, which gives the same answers.
@@ -491,7 +491,7 @@ fn sort_far_first<T: Copy>(h: &mut [T], dist: impl Fn(&T) -> f32) {
     }
 }
 
-/// Per-ray slab-test constants, as in the binary BVH (see `bvh::SlabRay`):
+/// Per-ray slab-test constants:
 /// true reciprocals, near/far planes chosen by the direction's sign bit, and
 /// comparisons written so a NaN (origin on a plane, zero direction) is ignored.
 struct Slab4 {
