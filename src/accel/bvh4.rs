@@ -59,15 +59,19 @@ pub struct Bvh4 {
     spheres: Vec<Prim>,
     /// The root: a node, or a leaf when the scene is tiny.
     root: u32,
+    /// SAH cost of the built tree: expected node visits plus 4-wide triangle
+    /// group tests (and sphere tests) for a ray through the root's box.
+    sah: f64,
 }
 
 impl Bvh4 {
     pub fn build(shapes: &[Shape]) -> Self {
         let prims = prims::collect(shapes);
-        let mut b = Bvh4 { nodes: Vec::new(), leaves: Vec::new(), groups: Vec::new(), ids: Vec::new(), spheres: Vec::new(), root: EMPTY };
+        let mut b = Bvh4 { nodes: Vec::new(), leaves: Vec::new(), groups: Vec::new(), ids: Vec::new(), spheres: Vec::new(), root: EMPTY, sah: 0.0 };
         let Some((tree, order)) = build_tree(&prims) else { return b };
         let ordered: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
         b.root = b.emit(&tree, &ordered);
+        b.sah = b.sah_cost(b.root, tree.bounds().half_area() as f64);
         b
     }
 
@@ -105,6 +109,30 @@ impl Bvh4 {
                 idx as u32
             }
         }
+    }
+
+    /// Surface-area-weighted cost of the subtree `code` (whose box has half
+    /// area `area`), relative to a root of half area `root`.
+    fn sah_cost(&self, code: u32, root: f64) -> f64 {
+        let root = root.max(f64::MIN_POSITIVE);
+        let mut cost = 0.0;
+        let mut stack = vec![(code, root)];
+        while let Some((c, area)) = stack.pop() {
+            if c & LEAF_BIT != 0 {
+                let l = &self.leaves[(c & !LEAF_BIT) as usize];
+                cost += area / root * (l.n_groups + l.n_spheres) as f64;
+                continue;
+            }
+            cost += area / root; // one visit tests all four child boxes
+            let n = &self.nodes[c as usize];
+            for lane in 0..WIDTH {
+                if n.child[lane] != EMPTY {
+                    let e = [0, 1, 2].map(|a| (n.bounds[3 + a][lane] - n.bounds[a][lane]).max(0.0) as f64);
+                    stack.push((n.child[lane], e[0] * e[1] + e[1] * e[2] + e[2] * e[0]));
+                }
+            }
+        }
+        cost
     }
 
     fn emit_leaf(&mut self, prims: &[Prim]) -> u32 {
@@ -421,7 +449,7 @@ impl Traversal for Bvh4 {
     }
 
     fn describe(&self) -> String {
-        format!("native (4-wide BVH, binned SAH, SSE, {} nodes, {} leaves)", self.nodes.len(), self.leaves.len())
+        format!("native (4-wide BVH, binned SAH, SSE, {} nodes, {} leaves, SAH cost {:.2})", self.nodes.len(), self.leaves.len(), self.sah)
     }
 
     fn memory_bytes(&self) -> usize {
