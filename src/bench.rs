@@ -417,14 +417,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     print!("{md}");
     if let Some(p) = &args.markdown {
-        crate::cli::write_text_atomically(p, &md)?;
+        crate::image_io::write_text(p, &md)?;
     }
     if let Some(p) = &args.csv {
         let mut csv = String::from("scene,rays,threads,backend,mrays_per_s\n");
         for s in &samples {
             let _ = writeln!(csv, "{},{},{},{},{:.4}", s.scene, s.rays, s.threads, s.backend, s.mrays_per_s);
         }
-        crate::cli::write_text_atomically(p, &csv)?;
+        crate::image_io::write_text(p, &csv)?;
     }
     Ok(())
 }

@@ -257,7 +257,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let camera = setup_camera(a, &scene, width, height)?;
     let output = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
     if let Some(p) = &a.write_camera {
-        write_text_atomically(p, &camera.to_settings())?;
+        image_io::write_text(p, &camera.to_settings())?;
     }
 
     let lights = match a.integrator {
@@ -388,8 +388,7 @@ fn compare(reference: &Path, images: &[PathBuf]) -> Result<()> {
 /// The path integrator renders diffuse and emissive materials; anything else
 /// is refused by name rather than approximated.
 pub fn check_materials(scene: &Scene) -> Result<()> {
-    for (obj, shape) in scene.objects.iter().zip(&scene.shapes) {
-        let _ = shape;
+    for obj in &scene.objects {
         let m = &scene.materials[obj.material];
         if !matches!(m.bsdf, Bsdf::Diffuse { .. } | Bsdf::Emission { .. }) {
             crate::bail!(
@@ -408,14 +407,4 @@ pub fn check_materials(scene: &Scene) -> Result<()> {
 pub fn rate_path(output: &Path) -> PathBuf {
     let stem = output.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     output.with_file_name(format!("{stem}_rate.png"))
-}
-
-pub fn write_text_atomically(path: &Path, text: &str) -> Result<()> {
-    let tmp = path.with_file_name(format!(".{}.partial-{}", path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(), std::process::id()));
-    std::fs::write(&tmp, text)
-        .and_then(|_| std::fs::rename(&tmp, path))
-        .map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            Error::new(format!("{}: cannot write: {e}", path.display()))
-        })
 }

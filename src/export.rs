@@ -52,7 +52,7 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
                 for t in &mesh.triangles {
                     let _ = writeln!(text, "f {0}//{0} {1}//{1} {2}//{2}", t[0] + 1, t[1] + 1, t[2] + 1);
                 }
-                crate::cli::write_text_atomically(&dir.join(&file), &text)?;
+                crate::image_io::write_text(&dir.join(&file), &text)?;
                 entry["type"] = json!("mesh");
                 entry["file"] = json!(file);
                 entry["triangles"] = json!(mesh.triangles.len());
@@ -102,5 +102,5 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
         "lights": light_list,
     });
     let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::new(format!("scene.json: {e}")))?;
-    crate::cli::write_text_atomically(&dir.join("scene.json"), &text)
+    crate::image_io::write_text(&dir.join("scene.json"), &text)
 }

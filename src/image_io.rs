@@ -53,7 +53,7 @@ fn temp_path(path: &Path) -> PathBuf {
 }
 
 /// Write with `write` to a temporary file beside `path`, then rename it.
-fn atomically(path: &Path, write: impl FnOnce(&Path) -> std::result::Result<(), String>) -> Result<()> {
+pub fn atomically(path: &Path, write: impl FnOnce(&Path) -> std::result::Result<(), String>) -> Result<()> {
     let tmp = temp_path(path);
     match write(&tmp) {
         Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
@@ -65,6 +65,11 @@ fn atomically(path: &Path, write: impl FnOnce(&Path) -> std::result::Result<(), 
             Err(Error::new(format!("{}: cannot write: {e}", path.display())))
         }
     }
+}
+
+/// A text file, written atomically.
+pub fn write_text(path: &Path, text: &str) -> Result<()> {
+    atomically(path, |tmp| std::fs::write(tmp, text).map_err(|e| e.to_string()))
 }
 
 fn write_rgba_png(path: &Path, w: u32, h: u32, data: Vec<u8>) -> Result<()> {

@@ -68,7 +68,7 @@ def write_zmap(path, z):
     """Blue (z <= -4) .. white (0) .. red (z >= 4), per pixel the worst channel."""
     import mitsuba as mi
 
-    zz = z[..., np.argmax(np.abs(z), axis=-1)] if False else np.take_along_axis(z, np.argmax(np.abs(z), axis=-1)[..., None], -1)[..., 0]
+    zz = np.take_along_axis(z, np.argmax(np.abs(z), axis=-1)[..., None], -1)[..., 0]
     t = np.clip(zz / 4.0, -1, 1)
     rgb = np.stack([1 - np.clip(-t, 0, 1), 1 - np.abs(t), 1 - np.clip(t, 0, 1)], -1)
     mi.Bitmap((rgb * 255).astype(np.uint8), pixel_format=mi.Bitmap.PixelFormat.RGB).write(path)
