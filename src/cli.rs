@@ -5,7 +5,7 @@ use crate::camera::{Camera, DEFAULT_HEIGHT, DEFAULT_WIDTH};
 use crate::error::{Error, Result};
 use crate::image_io;
 use crate::light::Lights;
-use crate::render::{self, normals::NormalShading, path::PathTracer, Adaptive, Integrator, Region, RenderSettings};
+use crate::render::{self, aov, normals::NormalShading, path::PathTracer, Adaptive, Integrator, Region, RenderSettings};
 use crate::scene::Bsdf;
 use crate::scene::{builtin, collada, Scene};
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -56,6 +56,10 @@ pub enum IntegratorKind {
     Path,
     /// Shading normal as colour, n*0.5+0.5 (CS184's normal_shading).
     Normals,
+    /// Distance to the first hit along the camera ray (0 where it escapes).
+    Depth,
+    /// A flat colour per object (`pathtracer export` lists each object's colour).
+    ObjectId,
 }
 
 #[derive(Args, Debug)]
@@ -226,7 +230,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             Some(r)
         }
     };
-    if a.integrator == IntegratorKind::Normals {
+    if a.integrator != IntegratorKind::Path {
         let lighting_flags = [
             (a.light_samples.is_some(), "-l"),
             (a.max_depth.is_some(), "-m"),
@@ -235,7 +239,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             (a.no_rr, "--no-rr"),
         ];
         if let Some((_, flag)) = lighting_flags.iter().find(|(used, _)| *used) {
-            crate::bail!("{flag} applies to light transport; it has no effect with --integrator normals");
+            crate::bail!("{flag} applies to light transport; it has no effect with --integrator {}", a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default());
         }
     }
     let light_samples = a.light_samples.unwrap_or(1);
@@ -272,11 +276,13 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             }
             l
         }
-        IntegratorKind::Normals => Lights::default(),
+        IntegratorKind::Normals | IntegratorKind::Depth | IntegratorKind::ObjectId => Lights::default(),
     };
     let built = accel::build(a.backend, &scene.shapes, threads)?;
     let integrator: Box<dyn Integrator> = match a.integrator {
         IntegratorKind::Normals => Box::new(NormalShading { scene: &scene, accel: built.accel.as_ref() }),
+        IntegratorKind::Depth => Box::new(aov::Depth { accel: built.accel.as_ref() }),
+        IntegratorKind::ObjectId => Box::new(aov::ObjectId { accel: built.accel.as_ref() }),
         IntegratorKind::Path => Box::new(PathTracer {
             scene: &scene,
             accel: built.accel.as_ref(),

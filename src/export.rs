@@ -37,6 +37,8 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
             "emission": v3(m.emission),
             "bsdf_two_sided": true,
             "emission_one_sided": true,
+            // The flat colour of `--integrator object-id`.
+            "id_colour": v3(crate::render::aov::id_colour(id as u32)),
         });
         match shape {
             Shape::Mesh(mesh) => {

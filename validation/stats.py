@@ -28,11 +28,16 @@ PASS_FRACTION = 0.9975
 T_CRIT_001 = {3: 5.841, 4: 4.604, 5: 4.032, 6: 3.707, 7: 3.499, 8: 3.355, 9: 3.250, 10: 3.169, 11: 3.106, 12: 3.055, 13: 3.012, 14: 2.977, 15: 2.947}
 
 
+def z_critical(n):
+    """Two-sided critical |z| for n tests at family-wise alpha ALPHA (Šidák)."""
+    alpha_pix = 1.0 - (1.0 - ALPHA) ** (1.0 / max(n, 1))
+    return NormalDist().inv_cdf(1.0 - alpha_pix / 2.0)
+
+
 def verdict(x, var_x, r, var_r, batch_means_x, batch_means_r):
     x, var_x, r, var_r = (np.asarray(a, dtype=np.float64) for a in (x, var_x, r, var_r))
     n = x.size
-    alpha_pix = 1.0 - (1.0 - ALPHA) ** (1.0 / n)
-    z_pix = NormalDist().inv_cdf(1.0 - alpha_pix / 2.0)
+    z_pix = z_critical(n)
     var = var_x + var_r
     noisy = var > 0
     z = np.zeros_like(x)

@@ -1,6 +1,7 @@
 //! The image loop: tiles over rayon, one RNG stream per pixel, per-pixel mean
 //! and variance of the mean, progress bar, ray counts.
 
+pub mod aov;
 pub mod normals;
 pub mod path;
 

@@ -1,0 +1,432 @@
+"""Render an exported scene (scene.json from `pathtracer export`) with Blender Cycles, as
+independent renders (one EXR each; the harness takes their mean and variance).
+
+Run by Blender's own Python, which has no numpy:
+  blender -b --factory-startup --python-exit-code 1 -P cycles_ref.py -- SCENE_DIR --mode M ...
+
+Conventions (../shared/notes/references.md, measured on this machine kind with Blender 3.4.1):
+an empty scene and a black world; CPU, fixed threads, no adaptive sampling, no denoising, no
+clamping, no light threshold, no guiding; a box pixel filter one pixel wide; bounces
+= our -m minus 1 for every ray type; Standard view transform; float32 linear EXR. Camera from
+our camera frame with the horizontal field of view. Diffuse BSDF with roughness 0 (Lambert).
+
+Emitters: Cycles 3.4 is biased low near the plane of an emissive *mesh* (references.md,
+pitfall 3), so an emissive rectangle becomes an AREA lamp (power 4·L·A, one-sided like ours)
+plus a black stand-in quad just behind it that shows the emission to camera rays only and
+occludes like the emitter. Any other emissive shape is refused, not approximated. Point lamps
+have power 4π·I and radius 0; our directional light is a SUN lamp of angle 0 with strength =
+irradiance; our hemisphere light is a world shader that is L above the horizon (y > 0) and
+black below. Spheres are exact spheres (a one-point cloud of that radius).
+
+Modes other than `radiance` check intersection only: `object-id` paints every object its
+exported `id_colour` as emission, `depth` emits the distance from the camera (Camera Data →
+View Distance), `normal` writes Cycles' normal pass through the compositor. Like every
+Cycles pass they are averages over the pixel's samples (box filter), compared with our
+averages statistically. (A 0.01-px filter does not make Cycles sample the pixel centre: at
+Cycles' minimum width, side-wall depths still differed from the centre value by 0.03 at
+64x48, and at 1 spp the renders did not depend on the seed.)
+"""
+import json
+import math
+import os
+import sys
+import time
+
+import bpy
+from mathutils import Matrix, Vector
+
+
+def refuse(msg):
+    print(f"cycles_ref: cannot represent exactly: {msg}", file=sys.stderr)
+    sys.exit(3)
+
+
+def parse_args(argv):
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="cycles_ref.py")
+    ap.add_argument("scene")
+    ap.add_argument("--mode", choices=["radiance", "object-id", "depth", "normal"], default="radiance")
+    ap.add_argument("--max-depth", type=int, default=1, help="our -m")
+    ap.add_argument("--spp", type=int, required=True)
+    ap.add_argument("--renders", type=int, default=1)
+    ap.add_argument("--ladder", default="", help="also time single renders at these spp")
+    ap.add_argument("--threads", type=int, default=0, help="0: all cores")
+    ap.add_argument("--out", required=True, help="prefix: <out>_r<k>.exr, <out>_spp<N>.exr, <out>_cycles.json")
+    return ap.parse_args(argv)
+
+
+def read_obj(path):
+    verts, normals, faces = [], [], []
+    with open(path) as f:
+        for line in f:
+            if line.startswith("v "):
+                verts.append(tuple(float(x) for x in line.split()[1:4]))
+            elif line.startswith("vn "):
+                normals.append(tuple(float(x) for x in line.split()[1:4]))
+            elif line.startswith("f "):
+                idx = [w.split("/") for w in line.split()[1:]]
+                # Our exporter writes the normal index equal to the position index.
+                if any(len(i) != 3 or i[0] != i[2] for i in idx):
+                    refuse(f"{path}: face '{line.strip()}' is not 'f v//v ...' as `pathtracer export` writes")
+                faces.append(tuple(int(i[0]) - 1 for i in idx))
+    if len(normals) != len(verts):
+        refuse(f"{path}: {len(normals)} normals for {len(verts)} vertices")
+    return verts, normals, faces
+
+
+def node_tree(mat):
+    mat.use_nodes = True
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        nt.nodes.remove(n)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    return nt, out
+
+
+def diffuse_material(name, albedo):
+    mat = bpy.data.materials.new(name)
+    nt, out = node_tree(mat)
+    d = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    d.inputs["Color"].default_value = (*albedo, 1.0)
+    d.inputs["Roughness"].default_value = 0.0  # Lambert, not Oren-Nayar
+    nt.links.new(d.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def emission_material(name, colour, strength_from_distance=False):
+    mat = bpy.data.materials.new(name)
+    nt, out = node_tree(mat)
+    e = nt.nodes.new("ShaderNodeEmission")
+    e.inputs["Color"].default_value = (*colour, 1.0)
+    e.inputs["Strength"].default_value = 1.0
+    if strength_from_distance:
+        cam = nt.nodes.new("ShaderNodeCameraData")
+        nt.links.new(cam.outputs["View Distance"], e.inputs["Strength"])
+    nt.links.new(e.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def camera_only_emitter(name, radiance):
+    """Seen by camera rays from the front: radiance; otherwise a black diffuse surface
+    (the stand-in behind an AREA lamp: the lamp lights, the stand-in shows and occludes)."""
+    mat = bpy.data.materials.new(name)
+    nt, out = node_tree(mat)
+    black = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    black.inputs["Color"].default_value = (0, 0, 0, 1)
+    e = nt.nodes.new("ShaderNodeEmission")
+    e.inputs["Color"].default_value = (*radiance, 1.0)
+    e.inputs["Strength"].default_value = 1.0
+    geo = nt.nodes.new("ShaderNodeNewGeometry")
+    path = nt.nodes.new("ShaderNodeLightPath")
+    # visible = is camera ray AND not backfacing
+    inv = nt.nodes.new("ShaderNodeMath")
+    inv.operation = "SUBTRACT"
+    inv.inputs[0].default_value = 1.0
+    nt.links.new(geo.outputs["Backfacing"], inv.inputs[1])
+    both = nt.nodes.new("ShaderNodeMath")
+    both.operation = "MULTIPLY"
+    nt.links.new(path.outputs["Is Camera Ray"], both.inputs[0])
+    nt.links.new(inv.outputs["Value"], both.inputs[1])
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    nt.links.new(both.outputs["Value"], mix.inputs["Fac"])
+    nt.links.new(black.outputs["BSDF"], mix.inputs[1])
+    nt.links.new(e.outputs["Emission"], mix.inputs[2])
+    nt.links.new(mix.outputs["Shader"], out.inputs["Surface"])
+    return mat
+
+
+def add_mesh(name, verts, normals, faces, mat):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.validate(clean_customdata=False)
+    me.polygons.foreach_set("use_smooth", [True] * len(me.polygons))
+    # Our shading normals (CS184's area-weighted vertex normals), not Blender's.
+    me.use_auto_smooth = True
+    me.normals_split_custom_set_from_vertices(normals)
+    me.materials.append(mat)
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def add_sphere(name, centre, radius, mat):
+    """An exact sphere: a one-vertex mesh turned into a point of that radius."""
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([(0.0, 0.0, 0.0)], [], [])
+    ob = bpy.data.objects.new(name, me)
+    ob.location = centre
+    bpy.context.scene.collection.objects.link(ob)
+    group = bpy.data.node_groups.new(name + "_points", "GeometryNodeTree")
+    group.inputs.new("NodeSocketGeometry", "Geometry")
+    group.outputs.new("NodeSocketGeometry", "Geometry")
+    gi = group.nodes.new("NodeGroupInput")
+    go = group.nodes.new("NodeGroupOutput")
+    m2p = group.nodes.new("GeometryNodeMeshToPoints")
+    m2p.inputs["Radius"].default_value = radius
+    sm = group.nodes.new("GeometryNodeSetMaterial")
+    sm.inputs["Material"].default_value = mat
+    group.links.new(gi.outputs["Geometry"], m2p.inputs["Mesh"])
+    group.links.new(m2p.outputs["Points"], sm.inputs["Geometry"])
+    group.links.new(sm.outputs["Geometry"], go.inputs["Geometry"])
+    mod = ob.modifiers.new("points", "NODES")
+    mod.node_group = group
+    return ob
+
+
+def rectangle_of(verts, faces):
+    """(corner, edge u, edge v, winding normal) when the mesh is one planar rectangle of two
+    triangles, else None."""
+    if len(faces) != 2 or len(verts) not in (4, 6):
+        return None
+    pts = [Vector(v) for v in verts]
+    uniq = []
+    for p in pts:
+        if all((p - q).length > 1e-7 * (1 + p.length) for q in uniq):
+            uniq.append(p)
+    if len(uniq) != 4:
+        return None
+    a, b, c = (pts[i] for i in faces[0])
+    n = (b - a).cross(c - a)
+    if n.length == 0:
+        return None
+    n.normalize()
+    # Order the corners around the centre in the plane.
+    centre = sum(uniq, Vector()) / 4
+    ax = (uniq[0] - centre).normalized()
+    ay = n.cross(ax)
+    ring = sorted(uniq, key=lambda p: math.atan2((p - centre).dot(ay), (p - centre).dot(ax)))
+    u, v = ring[1] - ring[0], ring[3] - ring[0]
+    scale = max(u.length, v.length)
+    if abs(u.dot(v)) > 1e-5 * scale * scale or (ring[2] - ring[1] - v).length > 1e-5 * scale or abs((ring[2] - ring[0]).dot(n)) > 1e-5 * scale:
+        return None
+    # Both triangles must face the same way.
+    a2, b2, c2 = (pts[i] for i in faces[1])
+    if (b2 - a2).cross(c2 - a2).dot(n) <= 0:
+        return None
+    return ring[0], u, v, n
+
+
+def add_area_lamp(name, corner, u, v, n, radiance, cam_visible):
+    L = max(radiance)
+    if L <= 0:
+        return
+    area = u.cross(v).length
+    lamp = bpy.data.lights.new(name, "AREA")
+    lamp.shape = "RECTANGLE"
+    lamp.size, lamp.size_y = u.length, v.length
+    lamp.color = tuple(c / L for c in radiance)
+    lamp.energy = 4.0 * L * area  # measured: 4·L·A gives radiance L
+    lamp.spread = math.pi
+    lamp.cycles.cast_shadow = True
+    lamp.use_shadow = True
+    ob = bpy.data.objects.new(name, lamp)
+    # A Blender area lamp emits along its local -Z, with size along local X and Y.
+    x = u.normalized()
+    z = -n
+    y = z.cross(x)
+    centre = corner + 0.5 * u + 0.5 * v
+    ob.matrix_world = Matrix((
+        (x.x, y.x, z.x, centre.x),
+        (x.y, y.y, z.y, centre.y),
+        (x.z, y.z, z.z, centre.z),
+        (0, 0, 0, 1)))
+    ob.visible_camera = cam_visible
+    bpy.context.scene.collection.objects.link(ob)
+
+
+def build(spec, folder, mode):
+    scene = bpy.context.scene
+    for ob in list(bpy.data.objects):
+        bpy.data.objects.remove(ob, do_unlink=True)
+    world = bpy.data.worlds.new("world")
+    scene.world = world
+    world.use_nodes = True
+    wnt = world.node_tree
+    bg = wnt.nodes["Background"]
+    bg.inputs["Strength"].default_value = 0.0
+
+    for s in spec["shapes"]:
+        if not s.get("bsdf_two_sided", False) or not s.get("emission_one_sided", False):
+            refuse(f"shape {s['id']}: only two-sided diffuse and one-sided emission are modelled")
+        name = f"shape{s['id']}"
+        emissive = max(s["emission"]) > 0
+        rect = None
+        if s["type"] == "mesh":
+            verts, normals, faces = read_obj(os.path.join(folder, s["file"]))
+            if not faces:
+                refuse(f"shape {s['id']}: empty mesh")
+        if mode == "object-id":
+            mat = emission_material(name, s["id_colour"])
+        elif mode == "depth":
+            mat = emission_material(name, (1.0, 1.0, 1.0), strength_from_distance=True)
+        elif mode == "normal" or not emissive:
+            mat = diffuse_material(name, s["albedo"])
+        else:
+            if max(s["albedo"]) > 0:
+                refuse(f"shape {s['id']}: an emitter that also reflects")
+            if s["type"] != "mesh" or (rect := rectangle_of(verts, faces)) is None:
+                refuse(f"shape {s['id']} ({s['name']}): an emissive {s['type']} that is not one rectangle "
+                       "(Cycles 3.4 is biased near emissive meshes; only rectangles go through the exact AREA lamp)")
+            corner, u, v, n = rect
+            add_area_lamp(name + "_lamp", corner, u, v, n, s["emission"], cam_visible=False)
+            # The stand-in sits behind the lamp by 1e-4 of its size: the lamp lights the
+            # scene, the stand-in shows the emission to the camera and occludes.
+            back = -n * 1e-4 * max(u.length, v.length)
+            verts = [tuple(Vector(p) + back) for p in verts]
+            mat = camera_only_emitter(name, s["emission"])
+        if s["type"] == "mesh":
+            add_mesh(name, verts, normals, faces, mat)
+        elif s["type"] == "sphere":
+            add_sphere(name, s["center"], s["radius"], mat)
+        else:
+            refuse(f"shape type {s['type']}")
+
+    if mode == "radiance":
+        for i, l in enumerate(spec["lights"]):
+            t = l["type"]
+            if t == "emissive_shape":
+                continue
+            if t == "point":
+                I = max(l["intensity"])
+                lamp = bpy.data.lights.new(f"light{i}", "POINT")
+                lamp.color = tuple(c / I for c in l["intensity"]) if I > 0 else (0, 0, 0)
+                lamp.energy = 4.0 * math.pi * I  # measured: power 4π·I gives intensity I
+                lamp.shadow_soft_size = 0.0
+                ob = bpy.data.objects.new(f"light{i}", lamp)
+                ob.location = l["position"]
+                scene.collection.objects.link(ob)
+            elif t == "directional":
+                E = max(l["irradiance"])
+                lamp = bpy.data.lights.new(f"light{i}", "SUN")
+                lamp.color = tuple(c / E for c in l["irradiance"]) if E > 0 else (0, 0, 0)
+                lamp.energy = E
+                lamp.angle = 0.0
+                ob = bpy.data.objects.new(f"light{i}", lamp)
+                # The sun shines along its local -Z; to_light is +Z.
+                z = Vector(l["to_light"]).normalized()
+                ob.rotation_euler = z.to_track_quat("Z", "Y").to_euler()
+                scene.collection.objects.link(ob)
+            elif t == "hemisphere":
+                # Radiance L for directions with y > 0 (the upper hemisphere), 0 below.
+                up = Vector(l["up"])
+                if (up - Vector((0, 1, 0))).length > 0:
+                    refuse("hemisphere light around an axis other than +y")
+                coord = wnt.nodes.new("ShaderNodeTexCoord")
+                sep = wnt.nodes.new("ShaderNodeSeparateXYZ")
+                gt = wnt.nodes.new("ShaderNodeMath")
+                gt.operation = "GREATER_THAN"
+                gt.inputs[1].default_value = 0.0
+                wnt.links.new(coord.outputs["Generated"], sep.inputs["Vector"])
+                wnt.links.new(sep.outputs["Y"], gt.inputs[0])
+                bg.inputs["Color"].default_value = (*l["radiance"], 1.0)
+                wnt.links.new(gt.outputs["Value"], bg.inputs["Strength"])
+            elif t == "rect":
+                corner, u, v, n = (Vector(l[k]) for k in ("corner", "ex", "ey", "normal"))
+                if l.get("visible", False):
+                    refuse("a visible rectangle light without a shape")
+                # Ours: light-sampled only, not seen by any ray, not occluding.
+                add_area_lamp(f"light{i}", corner, u, v, n, l["radiance"], cam_visible=False)
+                lob = bpy.data.objects[f"light{i}"]
+                lob.visible_diffuse = lob.visible_glossy = lob.visible_transmission = False
+            else:
+                refuse(f"light type {t}")
+
+    cam = spec["camera"]
+    cd = bpy.data.cameras.new("camera")
+    cd.sensor_fit = "HORIZONTAL"
+    cd.angle = math.radians(cam["fov_x_deg"])
+    cd.clip_start = max(cam["near"], 1e-6)
+    cd.clip_end = min(cam["far"], 1e10)
+    co = bpy.data.objects.new("camera", cd)
+    r, u, f, o = (Vector(cam[k]) for k in ("right", "up", "forward", "origin"))
+    co.matrix_world = Matrix(((r.x, u.x, -f.x, o.x), (r.y, u.y, -f.y, o.y), (r.z, u.z, -f.z, o.z), (0, 0, 0, 1)))
+    scene.collection.objects.link(co)
+    scene.camera = co
+    return cam["width"], cam["height"]
+
+
+def configure(width, height, mode, max_depth, threads):
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device = "CPU"
+    if threads:
+        scene.render.threads_mode = "FIXED"
+        scene.render.threads = threads
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    scene.render.resolution_percentage = 100
+    scene.render.pixel_aspect_x = scene.render.pixel_aspect_y = 1
+    scene.render.use_border = False
+    scene.render.film_transparent = False
+    c.use_adaptive_sampling = False
+    c.use_denoising = False
+    c.use_animated_seed = False
+    c.pixel_filter_type = "BOX"
+    c.filter_width = 1.0
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.caustics_reflective = c.caustics_refractive = True
+    c.light_sampling_threshold = 0.0
+    c.use_fast_gi = False
+    c.min_light_bounces = 0
+    c.min_transparent_bounces = 0
+    for k in ("use_guiding", "use_light_tree"):
+        if hasattr(c, k):
+            setattr(c, k, False)
+    c.auto_scrambling_distance = False
+    c.scrambling_distance = 1.0
+    b = max(max_depth - 1, 0) if mode == "radiance" else 0
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = b
+    c.transparent_max_bounces = c.volume_bounces = b
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    scene.view_settings.exposure = 0.0
+    scene.view_settings.gamma = 1.0
+    im = scene.render.image_settings
+    im.file_format = "OPEN_EXR"
+    im.color_depth = "32"
+    im.color_mode = "RGB"
+    im.exr_codec = "ZIP"
+    if mode == "normal":
+        scene.view_layers[0].use_pass_normal = True
+        scene.use_nodes = True
+        nt = scene.node_tree
+        for n in list(nt.nodes):
+            nt.nodes.remove(n)
+        rl = nt.nodes.new("CompositorNodeRLayers")
+        comp = nt.nodes.new("CompositorNodeComposite")
+        comp.use_alpha = False
+        nt.links.new(rl.outputs["Normal"], comp.inputs["Image"])
+
+
+def render(path, spp, seed):
+    scene = bpy.context.scene
+    scene.cycles.samples = spp
+    scene.cycles.seed = seed
+    scene.render.filepath = path
+    t0 = time.time()
+    bpy.ops.render.render(write_still=True)
+    return time.time() - t0
+
+
+def main():
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    args = parse_args(argv)
+    with open(os.path.join(args.scene, "scene.json")) as f:
+        spec = json.load(f)
+    w, h = build(spec, args.scene, args.mode)
+    configure(w, h, args.mode, args.max_depth, args.threads)
+    meta = {"renderer": f"cycles (blender {bpy.app.version_string})", "mode": args.mode, "spp_per_render": args.spp, "renders": [], "ladder": []}
+    for k in range(args.renders):
+        p = f"{args.out}_r{k}.exr"
+        meta["renders"].append({"file": p, "seconds": render(p, args.spp, 1 + k)})
+    for n in [int(x) for x in args.ladder.split(",") if x]:
+        p = f"{args.out}_spp{n}.exr"
+        meta["ladder"].append({"spp": n, "file": p, "seconds": render(p, n, 1000 + n)})
+    with open(args.out + "_cycles.json", "w") as f:
+        json.dump(meta, f)
+
+
+main()
