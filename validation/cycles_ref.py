@@ -246,6 +246,7 @@ def build(spec, folder, mode):
     bg = wnt.nodes["Background"]
     bg.inputs["Strength"].default_value = 0.0
 
+    shadow_blind = []
     for s in spec["shapes"]:
         if not s.get("bsdf_two_sided", False) or not s.get("emission_one_sided", False):
             refuse(f"shape {s['id']}: only two-sided diffuse and one-sided emission are modelled")
@@ -272,11 +273,22 @@ def build(spec, folder, mode):
             add_area_lamp(name + "_lamp", corner, u, v, n, s["emission"], cam_visible=False)
             # The stand-in sits behind the lamp by 1e-4 of its size: the lamp lights the
             # scene, the stand-in shows the emission to the camera and occludes.
-            back = -n * 1e-4 * max(u.length, v.length)
-            verts = [tuple(Vector(p) + back) for p in verts]
+            delta = 1e-4 * max(u.length, v.length)
+            verts = [tuple(Vector(p) - n * delta) for p in verts]
             mat = camera_only_emitter(name, s["emission"])
+            # A point light in the emitter's plane (CBempty's lies in it, at its centre) is
+            # not occluded by our rectangle from either side, but would be by a stand-in
+            # moved behind it: the stand-in then stops no shadow ray, which is exact as long
+            # as no light lies further behind the plane (those our rectangle would shadow).
+            behind = [(Vector(l["position"]) - corner).dot(n) for l in spec["lights"] if l["type"] == "point"]
+            if any(abs(d) <= 2 * delta for d in behind):
+                if any(d < -2 * delta for d in behind):
+                    refuse(f"shape {s['id']}: point lights both in the plane of the emissive rectangle and behind it")
+                shadow_blind.append(name)
         if s["type"] == "mesh":
-            add_mesh(name, verts, normals, faces, mat)
+            ob = add_mesh(name, verts, normals, faces, mat)
+            if name in shadow_blind:
+                ob.visible_shadow = False
         elif s["type"] == "sphere":
             add_sphere(name, s["center"], s["radius"], mat)
         else:

@@ -36,8 +36,11 @@ BATCHES = 8
 REF_COLOURS = {"native": "#d62728", "embree": "#1f77b4", "mitsuba": "#2ca02c", "cycles": "#ff7f0e"}
 
 
-def radiance(scene, m, refs, flags=(), label=None):
-    return {"kind": "radiance", "scene": scene, "m": m, "refs": refs, "flags": list(flags), "label": label}
+def radiance(scene, m, refs, flags=(), label=None, spp_scale=1):
+    """spp_scale multiplies our spp: hemisphere sampling finds a small light with few samples,
+    and its per-pixel means are far from normal (most batches see 0-2 light hits) until there
+    are many."""
+    return {"kind": "radiance", "scene": scene, "m": m, "refs": refs, "flags": list(flags), "label": label, "spp_scale": spp_scale}
 
 
 def geometry(scene):
@@ -50,14 +53,14 @@ TIERS = {
     # width, height, our spp, reference spp per render, reference renders, spp ladder, cases
     "quick": dict(w=64, h=48, spp=256, ref_spp=128, ref_renders=16, ladder=[4, 16, 64], cases=[
         radiance(CB, 1, BOTH),
-        radiance(CB, 1, ["cycles"], ["-H"], "hemisphere sampling"),
+        radiance(CB, 1, ["cycles"], ["-H"], "hemisphere sampling", spp_scale=16),
         radiance(CB, 5, BOTH),
         radiance("CBempty.dae", 3, BOTH),
         geometry(CB),
     ]),
     "full": dict(w=256, h=192, spp=1024, ref_spp=256, ref_renders=16, ladder=[4, 16, 64, 256], cases=[
         radiance(CB, 1, BOTH),
-        radiance(CB, 1, BOTH, ["-H"], "hemisphere sampling"),
+        radiance(CB, 1, BOTH, ["-H"], "hemisphere sampling", spp_scale=16),
         radiance(CB, 2, BOTH),
         radiance(CB, 5, BOTH),
         radiance("CBempty.dae", 1, BOTH),
@@ -241,15 +244,20 @@ class Harness:
             refs[rname] = ref
             write_png(os.path.join(folder, f"{rname}.png"), to_png(ref["mean"]))
         for backend in self.backends:
-            x, var_x, means_x, seconds, _ = self.ours(scene_args, folder, backend, args, self.t["spp"], BATCHES, "img")
+            spp = self.t["spp"] * case["spp_scale"]
+            x, var_x, means_x, seconds, _ = self.ours(scene_args, folder, backend, args, spp, BATCHES, "img")
             write_png(os.path.join(folder, f"{backend}.png"), to_png(x))
             ladder_runs = self.ladder(scene_args, folder, backend, args)
             for rname, ref in refs.items():
-                v = stats.verdict(x, var_x, ref["mean"], ref["var"], means_x, ref["image_means"])
-                write_zmap(os.path.join(folder, f"{backend}_{rname}_z.png"), v.pop("z_image"))
+                v = stats.verdict(x, var_x, ref["mean"], ref["var"], means_x, ref["image_means"], spp, self.max_sample(folder, case))
+                z = v.pop("z_image")
+                write_zmap(os.path.join(folder, f"{backend}_{rname}_z.png"), z)
+                worst = np.argsort(-np.abs(z).max(-1), axis=None)[:8]
+                v["worst_pixels"] = [{"y": int(i // z.shape[1]), "x": int(i % z.shape[1]), "ours": x.reshape(-1, 3)[i].tolist(), "reference": ref["mean"].reshape(-1, 3)[i].tolist(),
+                                      "z": z.reshape(-1, 3)[i].tolist()} for i in worst]
                 ladder = [{"spp": n, "seconds": s, "rel_mse": rel_mse(img, ref["mean"])} for n, s, img in ladder_runs]
                 v.update({"kind": "radiance", "case": cid, "label": case["label"], "scene": name, "max_depth": case["m"], "flags": case["flags"], "backend": backend,
-                          "reference": rname, "reference_renderer": ref["renderer"], "spp": self.t["spp"], "seconds": seconds, "reference_spp": ref["spp"],
+                          "reference": rname, "reference_renderer": ref["renderer"], "spp": spp, "seconds": seconds, "reference_spp": ref["spp"],
                           "reference_seconds": ref["seconds"], "size": [self.t["w"], self.t["h"]], "curve": ladder, "reference_curve": ref["curve"],
                           "reference_noise_floor": float(np.mean(ref["var"] / (ref["mean"] ** 2 + 1e-2))),
                           "equal_time_rel_mse_ratio": equal_time_ratio(ladder, ref["curve"]),
@@ -258,6 +266,20 @@ class Harness:
                 eq = v["equal_time_rel_mse_ratio"]
                 print(f"{cid} {backend} vs {rname}: {'PASS' if v['passed'] else 'FAIL'} pixels {v['pass_fraction']*100:.2f}% global t {v['global_z']:+.2f} "
                       f"relMSE {v['rel_mse']:.2e} equal-time ratio {eq['ratio'] if eq else float('nan'):.2f}")
+
+    def max_sample(self, folder, case):
+        """The largest value one sample of uniform hemisphere sampling (-H) can take at -m 1:
+        (albedo/π)·L·cos/(1/2π) <= 2·albedo·L, with L the brightest emitted radiance. None
+        for other estimators (no such bound is used)."""
+        if "-H" not in case["flags"] or case["m"] != 1:
+            return None
+        with open(os.path.join(folder, "scene", "scene.json")) as f:
+            spec = json.load(f)
+        if any(l["type"] not in ("emissive_shape",) for l in spec["lights"]):
+            return None  # delta lights are sampled explicitly even with -H
+        albedo = max(max(s["albedo"]) for s in spec["shapes"])
+        radiance = max(max(s["emission"]) for s in spec["shapes"])
+        return 2.0 * albedo * radiance
 
     def run_geometry(self, case, results):
         name = os.path.splitext(case["scene"])[0]

@@ -34,16 +34,26 @@ def z_critical(n):
     return NormalDist().inv_cdf(1.0 - alpha_pix / 2.0)
 
 
-def verdict(x, var_x, r, var_r, batch_means_x, batch_means_r):
+def verdict(x, var_x, r, var_r, batch_means_x, batch_means_r, spp=None, max_sample=None):
+    """`max_sample`, when the estimator's largest single-sample value is known (uniform
+    hemisphere sampling at -m 1: 2·albedo·radiance), decides pixels where none of our `spp`
+    samples was non-zero: their sample variance is 0, which is no evidence of precision. Such a
+    pixel is consistent with a reference mean r when a hit probability p <= -ln(alpha_pix)/spp
+    (P(no hit in spp samples) >= alpha_pix) times max_sample reaches r."""
     x, var_x, r, var_r = (np.asarray(a, dtype=np.float64) for a in (x, var_x, r, var_r))
     n = x.size
     z_pix = z_critical(n)
+    alpha_pix = 1.0 - (1.0 - ALPHA) ** (1.0 / n)
     var = var_x + var_r
     noisy = var > 0
     z = np.zeros_like(x)
     z[noisy] = (x[noisy] - r[noisy]) / np.sqrt(var[noisy])
     exact_ok = np.abs(x - r) <= 1e-5 * np.maximum(np.abs(r), 1e-6)
     ok = np.where(noisy, np.abs(z) <= z_pix, exact_ok)
+    unobserved = (x == 0) & (var_x == 0) & (r > 0)
+    if max_sample is not None and spp:
+        bound = max_sample * -np.log(alpha_pix) / spp
+        ok = np.where(unobserved, r <= bound, ok)
     frac = float(ok.mean())
     z_sum = float(z[noisy].sum() / np.sqrt(max(noisy.sum(), 1)))
     bx, br = np.asarray(batch_means_x, dtype=np.float64), np.asarray(batch_means_r, dtype=np.float64)
@@ -57,6 +67,7 @@ def verdict(x, var_x, r, var_r, batch_means_x, batch_means_r):
     se_mean = se_glob
     return {
         "pixel_channels": int(n),
+        "pixel_channels_without_samples": int(unobserved.sum()),
         "alpha": ALPHA,
         "z_pixel_critical": z_pix,
         "pass_fraction": frac,
