@@ -29,6 +29,7 @@ Cycles' minimum width, side-wall depths still differed from the centre value by 
 import json
 import math
 import os
+import struct
 import sys
 import time
 
@@ -274,7 +275,13 @@ def build(spec, folder, mode):
             # The stand-in sits behind the lamp by 1e-4 of its size: the lamp lights the
             # scene, the stand-in shows the emission to the camera and occludes.
             delta = 1e-4 * max(u.length, v.length)
-            verts = [tuple(Vector(p) - n * delta) for p in verts]
+            moved = [tuple(Vector(p) - n * delta) for p in verts]
+            # Blender stores f32: far from the origin the step can round away, and the
+            # stand-in would then coincide with the lamp (measured at +8192: 30 % dark).
+            f32 = lambda t: struct.unpack("3f", struct.pack("3f", *t))
+            if any(f32(a) == f32(b) for a, b in zip(moved, verts)):
+                refuse(f"shape {s['id']}: the stand-in step {delta:.3g} behind the emissive rectangle rounds away in f32 at its coordinates")
+            verts = moved
             mat = camera_only_emitter(name, s["emission"])
             # A point light in the emitter's plane (CBempty's lies in it, at its centre) is
             # not occluded by our rectangle from either side, but would be by a stand-in

@@ -36,15 +36,55 @@ BATCHES = 8
 REF_COLOURS = {"native": "#d62728", "embree": "#1f77b4", "mitsuba": "#2ca02c", "cycles": "#ff7f0e"}
 
 
-def radiance(scene, m, refs, flags=(), label=None, spp_scale=1):
+def radiance(scene, m, refs, flags=(), label=None, spp_scale=1, ref_shift=None):
     """spp_scale multiplies our spp: hemisphere sampling finds a small light with few samples,
     and its per-pixel means are far from normal (most batches see 0-2 light hits) until there
     are many."""
-    return {"kind": "radiance", "scene": scene, "m": m, "refs": refs, "flags": list(flags), "label": label, "spp_scale": spp_scale}
+    return {"kind": "radiance", "scene": scene, "m": m, "refs": refs, "flags": list(flags), "label": label, "spp_scale": spp_scale, "ref_shift": ref_shift}
 
 
-def geometry(scene):
-    return {"kind": "geometry", "scene": scene}
+def geometry(scene, ref_shift=None):
+    return {"kind": "geometry", "scene": scene, "ref_shift": ref_shift}
+
+
+def shift_export(src, dst, shift):
+    """A copy of an exported scene moved by `shift`, for references that lose precision far
+    from the origin (measured: at +8192, Mitsuba 3.9.1's spheres shadow themselves and Cycles
+    3.4's image is 30 % dark). Our f32 coordinates there are multiples of 2^-10, so
+    subtracting 8192 in f64 is exact and the references see exactly our rounded geometry, at
+    the origin."""
+    os.makedirs(dst, exist_ok=True)
+    with open(os.path.join(src, "scene.json")) as f:
+        spec = json.load(f)
+    if shift == "recentre":
+        # Minus the camera's target region, rounded to a multiple of 1024: a power of two
+        # times an integer, so the subtraction stays exact.
+        pts = [s["center"] for s in spec["shapes"] if s["type"] == "sphere"]
+        for s in spec["shapes"]:
+            if s["type"] == "mesh":
+                with open(os.path.join(src, s["file"])) as f:
+                    pts += [[float(c) for c in line.split()[1:4]] for line in f if line.startswith("v ")]
+        shift = [-1024.0 * round(c / 1024.0) for c in np.mean(pts, axis=0)]
+    sv = np.asarray(shift, dtype=np.float64)
+    mv = lambda p: [float(a + b) for a, b in zip(p, sv)]
+    spec["camera"]["origin"] = mv(spec["camera"]["origin"])
+    spec["shifted_by"] = sv.tolist()
+    for s in spec["shapes"]:
+        if s["type"] == "sphere":
+            s["center"] = mv(s["center"])
+        elif s["type"] == "mesh":
+            with open(os.path.join(src, s["file"])) as f, open(os.path.join(dst, s["file"]), "w") as g:
+                for line in f:
+                    if line.startswith("v "):
+                        line = "v " + " ".join(repr(c) for c in mv(float(c) for c in line.split()[1:4])) + "\n"
+                    g.write(line)
+    for l in spec["lights"]:
+        for k in ("position", "corner"):
+            if k in l:
+                l[k] = mv(l[k])
+    with open(os.path.join(dst, "scene.json"), "w") as f:
+        json.dump(spec, f, indent=1)
+    return dst
 
 
 CB = "CBspheres_lambertian.dae"
@@ -56,7 +96,9 @@ TIERS = {
         radiance(CB, 1, ["cycles"], ["-H"], "hemisphere sampling", spp_scale=16),
         radiance(CB, 5, BOTH),
         radiance("CBempty.dae", 3, BOTH),
+        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="recentre"),
         geometry(CB),
+        geometry("hard_tiny.dae"),
     ]),
     "full": dict(w=256, h=192, spp=1024, ref_spp=256, ref_renders=16, ladder=[4, 16, 64, 256], cases=[
         radiance(CB, 1, BOTH),
@@ -67,8 +109,17 @@ TIERS = {
         radiance("CBempty.dae", 3, BOTH),
         radiance("CBbunny.dae", 5, BOTH),
         radiance("bunny.dae", 3, ["cycles"], label="hemisphere light"),
+        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="recentre"),
+        radiance("hard_tiny.dae", 3, BOTH, label="hard case: scaled by 1e-3"),
+        radiance("hard_huge.dae", 3, BOTH, label="hard case: scaled by 1e3"),
+        radiance("hard_grazing.dae", 3, BOTH, label="hard case: light 1e-4 under the ceiling"),
+        radiance("hard_slab.dae", 3, BOTH, label="hard case: 1e-4-thick slab"),
         geometry(CB),
         geometry("CBbunny.dae"),
+        geometry("hard_offset.dae", ref_shift="recentre"),
+        geometry("hard_tiny.dae"),
+        geometry("hard_huge.dae"),
+        geometry("hard_slab.dae"),
     ]),
 }
 
@@ -143,23 +194,28 @@ class Harness:
         self.povray = shutil.which("povray")
 
     def export(self, case, folder):
+        """Export the case's scene with our loader into folder/scene. With `ref_shift`, the
+        references get a copy moved by that vector (folder/scene_ref), see shift_export.
+        Returns (our scene arguments, cache key of the references' scene, its folder)."""
         scene = find_scene(case["scene"])
         sh([self.pt, "export", scene, *self.view, "--out", os.path.join(folder, "scene")])
         d = os.path.join(folder, "scene")
+        if case.get("ref_shift"):
+            d = shift_export(d, os.path.join(folder, "scene_ref"), case["ref_shift"])
         h = hashlib.sha256()
         for p in sorted(os.listdir(d)):
             with open(os.path.join(d, p), "rb") as f:
                 h.update(p.encode() + f.read())
-        return [scene], h.hexdigest()[:16]
+        return [scene], h.hexdigest()[:16], d
 
     # ---- references: each returns {renderer, mean, var, image_means, spp, seconds, curve} ----
 
-    def mitsuba(self, folder, key, m):
+    def mitsuba(self, scene_dir, key, m):
         t = self.t
         lad = ",".join(str(n) for n in t["ladder"])
         ref = os.path.join(self.cache, f"mitsuba_{key}_m{m}_{t['ref_spp']}x{t['ref_renders']}_l{lad.replace(',', '-')}")
         if not os.path.exists(ref + "_ladder.json"):
-            r = subprocess.run([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), os.path.join(folder, "scene"), "--max-depth", str(m), "--spp", str(t["ref_spp"]),
+            r = subprocess.run([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), scene_dir, "--max-depth", str(m), "--spp", str(t["ref_spp"]),
                                 "--renders", str(t["ref_renders"]), "--out", ref, "--ladder", lad], capture_output=True, text=True)
             if r.returncode == 3:
                 return {"refused": r.stderr.strip()}
@@ -173,7 +229,7 @@ class Harness:
         return {"renderer": meta["renderer"], "mean": mean, "var": read_exr(ref + "_var.exr"), "image_means": meta["image_means"], "spp": meta["spp"],
                 "seconds": meta["seconds"], "curve": curve}
 
-    def cycles(self, folder, key, m, mode="radiance", spp=None, renders=None, ladder=None):
+    def cycles(self, scene_dir, key, m, mode="radiance", spp=None, renders=None, ladder=None):
         if not self.blender:
             sys.exit("run_cases: blender not found (validation/setup installs Debian's blender)")
         t = self.t
@@ -184,7 +240,7 @@ class Harness:
         ref = os.path.join(self.cache, f"cycles_{key}_{mode}_m{m}_{spp}x{renders}_l{lad.replace(',', '-')}")
         if not os.path.exists(ref + "_cycles.json"):
             r = subprocess.run([self.blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--",
-                                os.path.join(folder, "scene"), "--mode", mode, "--max-depth", str(m), "--spp", str(spp), "--renders", str(renders), "--ladder", lad,
+                                scene_dir, "--mode", mode, "--max-depth", str(m), "--spp", str(spp), "--renders", str(renders), "--ladder", lad,
                                 "--out", ref], capture_output=True, text=True)
             if r.returncode == 3 or "cannot represent exactly" in r.stderr:
                 return {"refused": [l for l in r.stderr.splitlines() if "cycles_ref" in l][-1]}
@@ -232,11 +288,11 @@ class Harness:
         name = os.path.splitext(case["scene"])[0]
         cid = f"{name}_m{case['m']}" + "".join(f.replace("-", "_") for f in case["flags"])
         folder = self.fresh(cid)
-        scene_args, key = self.export(case, folder)
+        scene_args, key, ref_dir = self.export(case, folder)
         args = ["-m", str(case["m"]), *case["flags"]]
         refs = {}
         for rname in case["refs"]:
-            ref = getattr(self, rname)(folder, key, case["m"])
+            ref = getattr(self, rname)(ref_dir, key, case["m"])
             if "refused" in ref:
                 print(f"{cid}: {rname} refuses the scene: {ref['refused']}")
                 results.append({"kind": "radiance", "case": cid, "label": case["label"], "reference": rname, "backend": "-", "refused": ref["refused"], "passed": True})
@@ -285,8 +341,7 @@ class Harness:
         name = os.path.splitext(case["scene"])[0]
         cid = f"{name}_geometry"
         folder = self.fresh(cid)
-        scene_args, key = self.export(case, folder)
-        sc = os.path.join(folder, "scene")
+        scene_args, key, sc = self.export(case, folder)
         # POV-Ray: one ray through each pixel centre, as ours at -s 1.
         pov = {}
         for mode in ("object-id", "depth"):
@@ -295,7 +350,7 @@ class Harness:
                 sh([sys.executable, os.path.join(HERE, "pov_ref.py"), sc, "--mode", mode, "--out", p])
             pov[mode] = read_exr(p)
         # Cycles: pixel averages over the box filter, independent renders.
-        cyc = {mode: self.cycles(folder, key, 1, mode, spp=64, renders=8, ladder=[]) for mode in ("object-id", "depth", "normal")}
+        cyc = {mode: self.cycles(sc, key, 1, mode, spp=64, renders=8, ladder=[]) for mode in ("object-id", "depth", "normal")}
         for backend in self.backends:
             centre = {}
             for mode in ("object-id", "depth"):
