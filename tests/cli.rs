@@ -164,3 +164,45 @@ fn adaptive_sampling_writes_a_rate_image_and_stops_early() {
         assert!(pathtracer::image_io::read_exr(&var).unwrap().pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
     }
 }
+
+#[test]
+fn depth_and_object_id_images_describe_the_first_hit() {
+    // One ray through each pixel centre: every object-id pixel is black or one exported
+    // id colour, depth is positive exactly where something was hit, and on the back wall it
+    // is the distance along the ray (not the planar z), from the exported camera.
+    let d = scratch("aov");
+    let view = ["-r", "64", "48", "--keep-fov"];
+    run(&d, &["export", view[0], view[1], view[2], view[3], "--out", d.join("scene").to_str().unwrap()]);
+    let spec: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("scene/scene.json")).unwrap()).unwrap();
+    let v3 = |v: &serde_json::Value| glam::Vec3::new(v[0].as_f64().unwrap() as f32, v[1].as_f64().unwrap() as f32, v[2].as_f64().unwrap() as f32);
+    let colours: Vec<(String, glam::Vec3)> = spec["shapes"].as_array().unwrap().iter().map(|s| (s["name"].as_str().unwrap().to_string(), v3(&s["id_colour"]))).collect();
+    let ids = render_exr(&d, "ids", &["--integrator", "object-id", "-s", "1", view[0], view[1], view[2], view[3]]);
+    let depth = render_exr(&d, "depth", &["--integrator", "depth", "-s", "1", view[0], view[1], view[2], view[3]]);
+    for (p, z) in ids.pixels.iter().zip(&depth.pixels) {
+        assert!(*p == glam::Vec3::ZERO || colours.iter().any(|(_, c)| c == p), "pixel colour {p} is no object's id colour");
+        assert_eq!(*p == glam::Vec3::ZERO, z.x == 0.0, "depth {z} where the id is {p}");
+    }
+    let back = colours.iter().find(|(n, _)| n == "backWall").unwrap().1;
+    let cam = &spec["camera"];
+    let (o, right, up, fwd) = (v3(&cam["origin"]), v3(&cam["right"]), v3(&cam["up"]), v3(&cam["forward"]));
+    let tx = (cam["fov_x_deg"].as_f64().unwrap().to_radians() / 2.0).tan() as f32;
+    let ty = tx * 48.0 / 64.0;
+    // The back wall's plane from the exported mesh.
+    let shape = spec["shapes"].as_array().unwrap().iter().find(|s| s["name"] == "backWall").unwrap();
+    let obj = std::fs::read_to_string(d.join("scene").join(shape["file"].as_str().unwrap())).unwrap();
+    let zb: f32 = obj.lines().find(|l| l.starts_with("v ")).unwrap().split_whitespace().nth(3).unwrap().parse().unwrap();
+    let mut checked = 0;
+    for y in 0..48 {
+        for x in 0..64 {
+            if ids.pixels[y * 64 + x] != back {
+                continue;
+            }
+            let dir = (fwd + right * (((x as f32 + 0.5) / 64.0 * 2.0 - 1.0) * tx) + up * ((1.0 - (y as f32 + 0.5) / 48.0 * 2.0) * ty)).normalize();
+            let expected = (zb - o.z) / dir.z;
+            let got = depth.pixels[y * 64 + x].x;
+            assert!((got - expected).abs() <= 1e-5 * expected, "pixel ({x}, {y}): depth {got}, expected {expected}");
+            checked += 1;
+        }
+    }
+    assert!(checked > 100, "only {checked} back-wall pixels");
+}

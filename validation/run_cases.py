@@ -33,7 +33,7 @@ sys.path.insert(0, HERE)
 import stats  # noqa: E402
 
 BATCHES = 8
-REF_COLOURS = {"native": "#d62728", "embree": "#1f77b4", "mitsuba": "#2ca02c", "cycles": "#ff7f0e"}
+REF_COLOURS = {"native": "#d62728", "embree": "#1f77b4", "mitsuba": "#2ca02c", "cycles": "#ff7f0e", "povray": "#9467bd"}
 
 
 def radiance(scene, m, refs, flags=(), label=None, spp_scale=1, ref_shift=None):
@@ -89,10 +89,11 @@ def shift_export(src, dst, shift):
 
 CB = "CBspheres_lambertian.dae"
 BOTH = ["mitsuba", "cycles"]
+ALL = BOTH + ["povray"]  # POV-Ray: direct lighting only
 TIERS = {
     # width, height, our spp, reference spp per render, reference renders, spp ladder, cases
-    "quick": dict(w=64, h=48, spp=256, ref_spp=128, ref_renders=16, ladder=[4, 16, 64], cases=[
-        radiance(CB, 1, BOTH),
+    "quick": dict(w=64, h=48, spp=256, ref_spp=128, ref_renders=16, ladder=[4, 16, 64], pov_supersample=4, pov_lightlets=8, cases=[
+        radiance(CB, 1, ALL),
         radiance(CB, 1, ["cycles"], ["-H"], "hemisphere sampling", spp_scale=16),
         radiance(CB, 5, BOTH),
         radiance("CBempty.dae", 3, BOTH),
@@ -100,12 +101,12 @@ TIERS = {
         geometry(CB),
         geometry("hard_tiny.dae"),
     ]),
-    "full": dict(w=256, h=192, spp=1024, ref_spp=256, ref_renders=16, ladder=[4, 16, 64, 256], cases=[
-        radiance(CB, 1, BOTH),
+    "full": dict(w=256, h=192, spp=1024, ref_spp=256, ref_renders=16, ladder=[4, 16, 64, 256], pov_supersample=2, pov_lightlets=16, cases=[
+        radiance(CB, 1, ALL),
         radiance(CB, 1, BOTH, ["-H"], "hemisphere sampling", spp_scale=16),
         radiance(CB, 2, BOTH),
         radiance(CB, 5, BOTH),
-        radiance("CBempty.dae", 1, BOTH),
+        radiance("CBempty.dae", 1, ALL),
         radiance("CBempty.dae", 3, BOTH),
         radiance("CBbunny.dae", 5, BOTH),
         radiance("bunny.dae", 3, ["cycles"], label="hemisphere light"),
@@ -191,7 +192,7 @@ class Harness:
             if os.path.exists(os.path.join(self.out, f)):
                 os.remove(os.path.join(self.out, f))
         self.blender = shutil.which("blender")
-        self.povray = shutil.which("povray")
+        self.povray_bin = shutil.which("povray")
 
     def export(self, case, folder):
         """Export the case's scene with our loader into folder/scene. With `ref_shift`, the
@@ -254,6 +255,30 @@ class Harness:
         curve = [{"spp": p["spp"], "seconds": p["seconds"], "rel_mse": rel_mse(read_exr(p["file"]), mean)} for p in meta["ladder"]]
         return {"renderer": meta["renderer"], "mean": mean, "var": stack.var(axis=0, ddof=1) / len(imgs), "image_means": [float(i.mean()) for i in imgs],
                 "spp": spp * len(imgs), "seconds": sum(p["seconds"] for p in meta["renders"]), "curve": curve, "renders": imgs}
+
+    def povray(self, scene_dir, key, m):
+        """Direct lighting only (POV-Ray has no unbiased global illumination)."""
+        if m != 1:
+            return {"refused": "POV-Ray validates direct lighting (-m 1) only: its radiosity is a biased irradiance cache"}
+        t = self.t
+        S, n = t["pov_supersample"], t["pov_lightlets"]
+        ref = os.path.join(self.cache, f"pov_{key}_radiance_s{S}_n{n}_x{t['ref_renders']}")
+        if not os.path.exists(ref + "_pov.json"):
+            r = subprocess.run([sys.executable, os.path.join(HERE, "pov_ref.py"), scene_dir, "--mode", "radiance", "--renders", str(t["ref_renders"]),
+                                "--supersample", str(S), "--lightlets", str(n), "--out", ref], capture_output=True, text=True)
+            if r.returncode == 3:
+                return {"refused": r.stderr.strip()}
+            if r.returncode != 0:
+                sys.exit(f"run_cases: pov_ref.py failed:\n{r.stderr[-3000:]}")
+        with open(ref + "_pov.json") as f:
+            meta = json.load(f)
+        imgs = []
+        for p in meta["renders"]:
+            a = read_exr(p["file"])
+            imgs.append(a.reshape(a.shape[0] // S, S, a.shape[1] // S, S, 3).mean(axis=(1, 3)))
+        stack = np.stack(imgs)
+        return {"renderer": f"{meta['renderer']}, {n}x{n} lightlets, {S}x{S} rays/px", "mean": stack.mean(0), "var": stack.var(0, ddof=1) / len(imgs),
+                "image_means": [float(i.mean()) for i in imgs], "spp": S * S * len(imgs), "seconds": sum(p["seconds"] for p in meta["renders"]), "curve": []}
 
     # ---- ours ----
 
@@ -636,9 +661,9 @@ def main():
             hz.run_geometry(case, results)
     import mitsuba
 
-    pov = subprocess.run([hz.povray, "--version"], capture_output=True, text=True)
+    pov = subprocess.run([hz.povray_bin, "--version"], capture_output=True, text=True)
     refs = [f"mitsuba {mitsuba.__version__} scalar_rgb", sh([hz.blender, "--version"]).splitlines()[0] + " (Cycles)",
-            ((pov.stdout + pov.stderr).strip().splitlines() or ["POV-Ray"])[0]]
+            next((l.strip() for l in (pov.stdout + pov.stderr).splitlines() if l.startswith("POV-Ray")), "POV-Ray")]
     summary = {"tier": args.tier, "pathtracer": sh([args.pathtracer, "--version"]).strip(), "references": refs, "backends": hz.backends, "results": results,
                "all_passed": all(r["passed"] for r in results)}
     with open(os.path.join(args.out, "summary.json"), "w") as f:
