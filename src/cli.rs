@@ -315,8 +315,17 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         image_io::write_exr(p, &out.variance)?;
         written.push(p.display().to_string());
     }
+    // With -a, how many samples the pixels kept (their mean per pixel): what adaptive
+    // sampling saved against -s.
+    let kept = match adaptive {
+        Some(_) => {
+            let total: u64 = out.samples.iter().map(|&n| n as u64).sum();
+            format!(" | {total} samples kept ({:.1}/px of {spp})", total as f64 / out.samples.len().max(1) as f64)
+        }
+        None => String::new(),
+    };
     println!(
-        "{} | {} primitives | backend {} | BVH build {:.3} s | render {:.3} s | {} rays | {:.2} Mrays/s | {} threads | wrote {}",
+        "{} | {} primitives | backend {} | BVH build {:.3} s | render {:.3} s | {} rays | {:.2} Mrays/s{kept} | {} threads | wrote {}",
         scene.name,
         scene.primitive_count(),
         built.accel.describe(),

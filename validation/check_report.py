@@ -36,9 +36,8 @@ def main():
     if not m:
         sys.exit(f"check_report: the page did not finish loading in Chromium (no image count in the DOM): {dom.stderr[-500:]}")
     total, ok = int(m.group(1)), int(m.group(2))
-    verdict_rows = len(re.findall(r"<tr><td>", html.split('id="verdicts"')[1].split("</table>")[0]))
-    if 'id="geometry"' in html:
-        verdict_rows += len(re.findall(r"<tr><td>", html.split('id="geometry"')[1].split("</table>")[0]))
+    # One row with data-result per result in summary.json, across the tables.
+    verdict_rows = len(re.findall(r"<tr data-result(?:=\"\")?>", html))
     problems = []
     if total == 0 or ok != total:
         problems.append(f"{total - ok} of {total} images did not render")

@@ -47,6 +47,14 @@ def geometry(scene, ref_shift=None):
     return {"kind": "geometry", "scene": scene, "ref_shift": ref_shift}
 
 
+def adaptive(scene, m, refs, batch, tol, bias_runs):
+    """Adaptive sampling (-a batch tol, at the tier's spp as the maximum): the converged image
+    against the references, samples saved against uniform sampling at equal error, and the
+    bias of CS184's stopping rule against the pilot variant over `bias_runs` short runs of a
+    rare-path configuration (-H -m 1: a pixel whose first batch saw no light hit stops, dark)."""
+    return {"kind": "adaptive", "scene": scene, "m": m, "refs": refs, "batch": batch, "tol": tol, "bias_runs": bias_runs, "ref_shift": None}
+
+
 def shift_export(src, dst, shift):
     """A copy of an exported scene moved by `shift`, for references that lose precision far
     from the origin (measured: at +8192, Mitsuba 3.9.1's spheres shadow themselves and Cycles
@@ -98,6 +106,7 @@ TIERS = {
         radiance(CB, 5, BOTH),
         radiance("CBempty.dae", 3, BOTH),
         radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="recentre"),
+        adaptive(CB, 5, ["cycles"], 32, 0.05, 12),
         geometry(CB),
         geometry("hard_tiny.dae"),
     ]),
@@ -110,6 +119,7 @@ TIERS = {
         radiance("CBempty.dae", 3, BOTH),
         radiance("CBbunny.dae", 5, BOTH),
         radiance("bunny.dae", 3, ["cycles"], label="hemisphere light"),
+        adaptive(CB, 5, BOTH, 64, 0.05, 24),
         radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="recentre"),
         radiance("hard_tiny.dae", 3, BOTH, label="hard case: scaled by 1e-3"),
         radiance("hard_huge.dae", 3, BOTH, label="hard case: scaled by 1e3"),
@@ -362,6 +372,87 @@ class Harness:
         radiance = max(max(s["emission"]) for s in spec["shapes"])
         return 2.0 * albedo * radiance
 
+    def run_adaptive(self, case, results):
+        name = os.path.splitext(case["scene"])[0]
+        cid = f"{name}_m{case['m']}_adaptive"
+        folder = self.fresh(cid)
+        scene_args, key, ref_dir = self.export(case, folder)
+        S = self.t["spp"]
+        a_flags = ["-a", str(case["batch"]), str(case["tol"])]
+        refs = {r: self.getref(r, ref_dir, key, case["m"]) for r in case["refs"]}
+        refs = {r: v for r, v in refs.items() if "refused" not in v}
+        direct = {r: self.getref(r, ref_dir, key, 1) for r in case["refs"]}
+        direct = {r: v for r, v in direct.items() if "refused" not in v}
+        for rname, ref in refs.items():
+            write_png(os.path.join(folder, f"{rname}.png"), to_png(ref["mean"]))
+        for backend in self.backends:
+            # 1. The converged image: 8 independent adaptive renders at the full maximum.
+            xs, vs, kept = [], [], []
+            t0 = time.time()
+            for b in range(BATCHES):
+                exr, var = (os.path.join(folder, f"{backend}_a_b{b}{e}.exr") for e in ("", "_var"))
+                text = sh([self.pt, *scene_args, *self.view, "-s", str(S), *a_flags, "-m", str(case["m"]), "--backend", backend, "--seed", str(7 + b),
+                           "-f", os.path.join(folder, f"{backend}_a_b{b}.png"), "--exr", exr, "--variance-exr", var])
+                xs.append(read_exr(exr))
+                vs.append(read_exr(var))
+                kept.append(float(text.split("samples kept (")[1].split("/px")[0]))
+            seconds = time.time() - t0
+            x, var_x = np.mean(xs, 0), np.mean(vs, 0) / BATCHES
+            write_png(os.path.join(folder, f"{backend}.png"), to_png(x))
+            shutil.copy(os.path.join(folder, f"{backend}_a_b0_rate.png"), os.path.join(folder, f"{backend}_rate.png"))
+            # 2. Uniform sampling at S/8 .. S against one adaptive render, at equal error.
+            ladder = [S // 8, S // 4, S // 2, S]
+            uni = []
+            for n in ladder:
+                exr = os.path.join(folder, f"{backend}_u{n}.exr")
+                text = sh([self.pt, *scene_args, *self.view, "-s", str(n), "-m", str(case["m"]), "--backend", backend, "--seed", str(300 + n), "-f", os.path.join(folder, f"{backend}_u{n}.png"), "--exr", exr])
+                uni.append((n, float(text.split("| render ")[1].split(" s")[0]), read_exr(exr)))
+            exr = os.path.join(folder, f"{backend}_a1.exr")
+            text = sh([self.pt, *scene_args, *self.view, "-s", str(S), *a_flags, "-m", str(case["m"]), "--backend", backend, "--seed", "299", "-f", os.path.join(folder, f"{backend}_a1.png"), "--exr", exr])
+            a_spp = float(text.split("samples kept (")[1].split("/px")[0])
+            a_sec = float(text.split("| render ")[1].split(" s")[0])
+            a_img = read_exr(exr)
+            for rname, ref in refs.items():
+                v = stats.verdict(x, var_x, ref["mean"], ref["var"], [float(i.mean()) for i in xs], ref["image_means"])
+                write_zmap(os.path.join(folder, f"{backend}_{rname}_z.png"), v.pop("z_image"))
+                ucurve = [{"spp": n, "seconds": sec, "rel_mse": rel_mse(img, ref["mean"])} for n, sec, img in uni]
+                a_err = rel_mse(a_img, ref["mean"])
+                eq_spp = interp_loglog([(p["rel_mse"], p["spp"]) for p in ucurve], a_err)
+                eq_sec = interp_loglog([(p["rel_mse"], p["seconds"]) for p in ucurve], a_err)
+                v.update({"kind": "adaptive", "case": cid, "label": f"adaptive -a {case['batch']} {case['tol']} -s {S}", "scene": name, "max_depth": case["m"], "flags": a_flags,
+                          "backend": backend, "reference": rname, "reference_renderer": ref["renderer"], "spp": S, "mean_samples_kept": float(np.mean(kept)), "seconds": seconds,
+                          "uniform_curve": ucurve, "adaptive_single": {"samples_per_pixel": a_spp, "seconds": a_sec, "rel_mse": a_err},
+                          "uniform_spp_at_equal_error": eq_spp, "samples_saved": (1 - a_spp / eq_spp) if eq_spp else None,
+                          "uniform_seconds_at_equal_error": eq_sec, "time_saved": (1 - a_sec / eq_sec) if eq_sec else None})
+                results.append(v)
+                print(f"{cid} {backend} vs {rname}: {'PASS' if v['passed'] else 'FAIL'} pixels {v['pass_fraction']*100:.2f}% global t {v['global_z']:+.2f}; "
+                      f"{a_spp:.1f} spp/px vs uniform {eq_spp or float('nan'):.1f} at equal error")
+            # 3. Bias of the stopping rules on a rare-path configuration.
+            if direct:
+                rname, ref = next(iter(direct.items()))
+                rmeans = np.asarray(ref["image_means"])
+                bias = {}
+                for rule, extra in (("cs184", []), ("pilot", ["--adaptive-pilot"])):
+                    means = []
+                    for k in range(case["bias_runs"]):
+                        exr = os.path.join(folder, f"{backend}_bias_{rule}.exr")
+                        sh([self.pt, *scene_args, *self.view, "-s", str(S), "-a", "16", "0.05", "-H", "-m", "1", *extra, "--backend", backend, "--seed", str(500 + k),
+                            "-f", os.path.join(folder, f"{backend}_bias_{rule}.png"), "--exr", exr])
+                        means.append(float(read_exr(exr).mean()))
+                    m = np.asarray(means)
+                    se = float(np.sqrt(m.var(ddof=1) / m.size + rmeans.var(ddof=1) / rmeans.size))
+                    t = float((m.mean() - rmeans.mean()) / se)
+                    bias[rule] = {"runs": m.size, "mean": float(m.mean()), "relative_bias": float(m.mean() / rmeans.mean() - 1), "se_relative": se / float(rmeans.mean()), "t": t}
+                crit = stats.T_CRIT_001[min(case["bias_runs"], rmeans.size) - 1]
+                passed = abs(bias["pilot"]["t"]) <= crit
+                results.append({"kind": "adaptive_bias", "case": cid, "backend": backend, "reference": rname, "reference_renderer": ref["renderer"], "t_critical": crit,
+                                "config": f"-H -m 1 -s {S} -a 16 0.05, {case['bias_runs']} runs per rule", "bias": bias, "passed": bool(passed)})
+                print(f"{cid} {backend} stopping-rule bias vs {rname}: CS184 {100*bias['cs184']['relative_bias']:+.2f} % (t {bias['cs184']['t']:+.1f}), "
+                      f"pilot {100*bias['pilot']['relative_bias']:+.2f} % (t {bias['pilot']['t']:+.1f}): {'PASS' if passed else 'FAIL'}")
+
+    def getref(self, rname, ref_dir, key, m):
+        return getattr(self, rname)(ref_dir, key, m)
+
     def run_geometry(self, case, results):
         name = os.path.splitext(case["scene"])[0]
         cid = f"{name}_geometry"
@@ -518,6 +609,17 @@ def geometry_vs_cycles(cid, name, backend, ours, cyc, folder, cam):
     return out
 
 
+def interp_loglog(points, y):
+    """x at which the piecewise log-log line through (y_i, x_i), sorted by y, reaches y; None
+    outside the range."""
+    pts = sorted(points)
+    for (y0, x0), (y1, x1) in zip(pts, pts[1:]):
+        if y0 <= y <= y1 and y1 > y0 > 0:
+            a = (np.log(y) - np.log(y0)) / (np.log(y1) - np.log(y0))
+            return float(np.exp(np.log(x0) + a * (np.log(x1) - np.log(x0))))
+    return None
+
+
 def flip_error(x, r):
     """Mean FLIP (NVIDIA's flip-evaluator, LDR mode) between the CS184 tone-mapped images; None
     when the package is missing."""
@@ -576,28 +678,43 @@ def svg_curves(series, width=360, height=240):
 
 def write_report(out, summary):
     esc = html.escape
-    rad = [r for r in summary["results"] if r["kind"] == "radiance"]
+    rad = [r for r in summary["results"] if r["kind"] in ("radiance", "adaptive")]
+    ada = [r for r in summary["results"] if r["kind"] == "adaptive"]
+    bias = [r for r in summary["results"] if r["kind"] == "adaptive_bias"]
     geo = [r for r in summary["results"] if r["kind"] == "geometry"]
     rows = []
     for r in rad:
         title = esc(r["case"] + (f" ({r['label']})" if r.get("label") else ""))
         if "refused" in r:
-            rows.append(f"<tr><td>{title}</td><td>-</td><td>{esc(r['reference'])}</td><td class='refused' colspan='10'>reference refuses: {esc(r['refused'])}</td></tr>")
+            rows.append(f"<tr data-result><td>{title}</td><td>-</td><td>{esc(r['reference'])}</td><td class='refused' colspan='10'>reference refuses: {esc(r['refused'])}</td></tr>")
             continue
         c = r["case"]
         flip = f"{r['flip']:.4f}" if r.get("flip") is not None else "n/a"
         rows.append(
-            f"<tr><td>{title}</td><td>{r['backend']}</td><td>{esc(r['reference_renderer'])}</td><td class='{'pass' if r['passed'] else 'fail'}'>{'pass' if r['passed'] else 'FAIL'}</td>"
+            f"<tr data-result><td>{title}</td><td>{r['backend']}</td><td>{esc(r['reference_renderer'])}</td><td class='{'pass' if r['passed'] else 'fail'}'>{'pass' if r['passed'] else 'FAIL'}</td>"
             f"<td>{100 * r['pass_fraction']:.2f} %</td><td>{r['global_z']:+.2f}</td><td>{100 * (r['relative_mean_difference'] or 0):+.3f} %</td><td>{r['rel_mse']:.2e}</td>"
             f"<td>{r['smape']:.4f}</td><td>{flip}</td><td><img src='{esc(c)}/{r['backend']}.png'></td><td><img src='{esc(c)}/{r['reference']}.png'></td>"
             f"<td><img src='{esc(c)}/{r['backend']}_{r['reference']}_z.png'></td></tr>")
     grows = []
     for r in geo:
         imgs = "".join(f"<img src='{esc(r['case'])}/{esc(i)}'>" for i in r.get("images", []))
-        grows.append(f"<tr><td>{esc(r['case'])}</td><td>{r['backend']}</td><td>{r['reference']}</td><td class='{'pass' if r['passed'] else 'fail'}'>{'pass' if r['passed'] else 'FAIL'}</td>"
+        grows.append(f"<tr data-result><td>{esc(r['case'])}</td><td>{r['backend']}</td><td>{r['reference']}</td><td class='{'pass' if r['passed'] else 'fail'}'>{'pass' if r['passed'] else 'FAIL'}</td>"
                      f"<td style='text-align:left'>{esc(r['summary'])}</td><td>{imgs}</td></tr>")
+    arows = []
+    for r in ada:
+        a = r["adaptive_single"]
+        eq = r["uniform_spp_at_equal_error"]
+        arows.append(f"<tr><td>{esc(r['case'])}</td><td>{r['backend']}</td><td>{r['reference']}</td><td>{a['samples_per_pixel']:.1f} / {r['spp']}</td><td>{a['rel_mse']:.2e}</td>"
+                     f"<td>{'%.1f' % eq if eq else 'outside the ladder'}</td><td>{'%.0f %%' % (100 * r['samples_saved']) if r['samples_saved'] is not None else '-'}</td>"
+                     f"<td>{'%.0f %%' % (100 * r['time_saved']) if r['time_saved'] is not None else '-'}</td><td><img src='{esc(r['case'])}/{r['backend']}_rate.png'></td></tr>")
+    for r in bias:
+        b = r["bias"]
+        arows.append(f"<tr data-result><td>{esc(r['case'])}</td><td>{r['backend']}</td><td>{r['reference']}</td><td colspan='5' style='text-align:left'>stopping-rule bias, {esc(r['config'])}: "
+                     f"CS184 rule {100*b['cs184']['relative_bias']:+.2f} % &plusmn; {100*b['cs184']['se_relative']:.2f} % (t {b['cs184']['t']:+.1f}); "
+                     f"pilot {100*b['pilot']['relative_bias']:+.2f} % &plusmn; {100*b['pilot']['se_relative']:.2f} % (t {b['pilot']['t']:+.1f}, critical {r['t_critical']:.2f})</td>"
+                     f"<td class='{'pass' if r['passed'] else 'fail'}'>{'pilot unbiased: pass' if r['passed'] else 'FAIL'}</td></tr>")
     curves, eff_rows = [], []
-    for case in sorted({r["case"] for r in rad if "refused" not in r}):
+    for case in sorted({r["case"] for r in rad if "refused" not in r and r["kind"] == "radiance"}):
         rs = [r for r in rad if r["case"] == case and "refused" not in r]
         series = []
         for r in rs:
@@ -633,6 +750,13 @@ z-map: blue z &le; -4, white 0, red z &ge; 4. FLIP: mean LDR FLIP of the tone-ma
 neighbour), depths equal to POV-Ray's half-float precision. Cycles: pixel averages; ids identical on interior pixels, silhouette
 coverage and interior depth and normal by the per-pixel z-test. Images: ours, reference, differences (orange: silhouette, red: failure).</p>
 <table id="geometry"><tr><th>case</th><th>backend</th><th>reference</th><th>verdict</th><th>what was found</th><th>images</th></tr>{''.join(grows)}</table>
+<h2>Adaptive sampling</h2>
+<p>One adaptive render against uniform renders at 1/8 .. 1 of the maximum: the uniform spp (and time) at the adaptive render's
+relMSE, by log-log interpolation; samples saved = 1 - adaptive samples / uniform samples at equal error. The bias rows run a
+rare-path configuration many times with each stopping rule; the pilot rule must be unbiased, the CS184 rule's bias is reported.
+Image: the rate image (samples kept per pixel).</p>
+<table id="adaptive"><tr><th>case</th><th>backend</th><th>reference</th><th>spp kept / max</th><th>relMSE</th><th>uniform spp at equal error</th>
+<th>samples saved</th><th>time saved</th><th>rate</th></tr>{''.join(arows)}</table>
 <h2>Error against time</h2><p>relMSE against the reference's mean (its noise floor is in summary.json) along the spp ladder; render time
 excludes process start and scene loading for every renderer.</p>
 {''.join(curves)}
@@ -655,10 +779,7 @@ def main():
     for case in tier["cases"]:
         if args.only and args.only not in case["scene"]:
             continue
-        if case["kind"] == "radiance":
-            hz.run_radiance(case, results)
-        else:
-            hz.run_geometry(case, results)
+        {"radiance": hz.run_radiance, "geometry": hz.run_geometry, "adaptive": hz.run_adaptive}[case["kind"]](case, results)
     import mitsuba
 
     pov = subprocess.run([hz.povray_bin, "--version"], capture_output=True, text=True)
