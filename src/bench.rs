@@ -1,5 +1,6 @@
 //! `pathtracer bench`: BVH build time, memory and ray throughput per backend,
-//! and CS184's with/without-BVH render timing, printed as a Markdown table.
+//! CS184's with/without-BVH render timing, and full path-traced renders per
+//! backend, printed as Markdown tables.
 //!
 //! The ray sets are public so the cross-check tests trace exactly what the
 //! benchmark times.
@@ -8,7 +9,8 @@ use crate::accel::{self, BackendKind, Hit, Traversal};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::ray::Ray;
-use crate::render::{self, normals::NormalShading, RenderSettings};
+use crate::light::Lights;
+use crate::render::{self, normals::NormalShading, path::PathTracer, RenderSettings};
 use crate::rng::Rng;
 use crate::scene::{Scene, Shape, TriangleMesh};
 use clap::Args;
@@ -30,7 +32,8 @@ pub struct BenchArgs {
     /// Rays per throughput measurement (brute uses a 1/32 subset)
     #[arg(long, default_value_t = 1 << 20)]
     pub rays: usize,
-    /// Skip the 480x360 render timing with and without the BVH
+    /// Skip the render timings (normal shading with and without the BVH;
+    /// path tracing of CBbunny and CBspheres_lambertian at 64 spp, -m 5)
     #[arg(long)]
     pub no_render: bool,
     /// Also write the throughput rows as CSV
@@ -41,7 +44,11 @@ pub struct BenchArgs {
     pub markdown: Option<PathBuf>,
 }
 
-pub const DEFAULT_SCENES: [&str; 5] = ["cow", "maxplanck", "CBbunny", "beetle", "sphere:1M"];
+pub const DEFAULT_SCENES: [&str; 6] = ["cow", "maxplanck", "CBbunny", "beetle", "sphere:1M", "sphere:5M"];
+
+/// Path-traced render timing (the benchmark's last table): these scenes at
+/// 480x360, 64 spp, -m 5, every backend but brute, same seed.
+pub const RENDER_SCENES: [&str; 2] = ["CBbunny", "CBspheres_lambertian"];
 
 /// Brute force is skipped above this many primitives (hours per measurement).
 const BRUTE_LIMIT: usize = 100_000;
@@ -282,6 +289,57 @@ fn embree_modes(scene: &Scene, cam: &[Ray], rnd: &[Ray], shadow: &[Ray], rows: &
     Ok(())
 }
 
+/// Time full renders of one scene per backend, with and without camera-ray
+/// batches, and check that every render made the same image.
+fn path_render_rows(name: &str, backends: &[BackendKind], threads: usize) -> Result<String> {
+    let scene = load_bench_scene(name)?;
+    let lights = Lights::from_scene(&scene)?;
+    let mut cam = Camera::from_scene(&scene);
+    cam.set_screen_size(480, 360);
+    let mut rows = String::new();
+    let mut first: Option<Vec<Vec3>> = None;
+    for &kind in backends {
+        let built = accel::build(kind, &scene.shapes, threads)?;
+        let integ = PathTracer {
+            scene: &scene,
+            accel: built.accel.as_ref(),
+            lights: &lights,
+            max_depth: 5,
+            accumulate: true,
+            hemisphere: false,
+            light_samples: 1,
+            russian_roulette: true,
+        };
+        for batch in [true, false] {
+            let mut settings = RenderSettings::new(480, 360, 64, 1);
+            settings.batch_camera_rays = batch;
+            let out = render::render(&cam, &integ, &settings);
+            let same = match &first {
+                None => {
+                    first = Some(out.image.pixels.clone());
+                    "reference".to_string()
+                }
+                Some(f) => {
+                    let differ = f.iter().zip(&out.image.pixels).filter(|(a, b)| a != b).count();
+                    if differ == 0 { "identical".to_string() } else { format!("{differ} pixels differ") }
+                }
+            };
+            let _ = writeln!(
+                rows,
+                "| {} | {} | {} | {:.2} | {} | {:.2} | {} |",
+                scene.name,
+                kind,
+                if batch { "batched" } else { "single" },
+                out.seconds,
+                out.rays,
+                out.rays as f64 / out.seconds / 1e6,
+                same
+            );
+        }
+    }
+    Ok(rows)
+}
+
 /// The seed write-up's render timings (normal shading), where it gives them.
 fn seed_timing(scene: &str) -> (&'static str, &'static str) {
     match scene {
@@ -380,7 +438,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 let mut cam = camera.clone();
                 cam.set_screen_size(480, 360);
                 let integ = NormalShading { scene: &scene, accel: built.accel.as_ref() };
-                let settings = RenderSettings { width: 480, height: 360, spp: 1, seed: 0, region: None, adaptive: None, progress: false };
+                let settings = RenderSettings::new(480, 360, 1, 0);
                 let out = render::render(&cam, &integ, &settings);
                 times.push(out.seconds);
             }
@@ -414,6 +472,19 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let _ = writeln!(md, "| scene | prims | with BVH | without BVH | speed-up | seed with BVH | seed without |");
         let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|---:|");
         md.push_str(&render_rows);
+    }
+    if !args.no_render {
+        let backends: Vec<BackendKind> = backends.iter().copied().filter(|b| *b != BackendKind::Brute).collect();
+        let _ = writeln!(
+            md,
+            "\nPath-traced render, 480x360 (CS184 crop), 64 spp, -m 5, seed 1, {all} threads: camera rays traced per tile \
+             as one coherent batch (the renderer's default) or one at a time. Same image in every row of a scene:\n"
+        );
+        let _ = writeln!(md, "| scene | backend | camera rays | render s | rays | Mrays/s | image |");
+        let _ = writeln!(md, "|---|---|---|---:|---:|---:|---|");
+        for name in RENDER_SCENES {
+            md.push_str(&path_render_rows(name, &backends, all)?);
+        }
     }
     print!("{md}");
     if let Some(p) = &args.markdown {

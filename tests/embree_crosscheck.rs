@@ -200,7 +200,7 @@ fn normal_images_of_cornell_boxes_are_identical_but_for_ties() {
         let embree = common::build(BackendKind::Embree, &scene.shapes);
         let mut camera = Camera::from_scene(&scene);
         camera.set_screen_size(320, 240);
-        let settings = RenderSettings { width: 320, height: 240, spp: 1, seed: 0, region: None, adaptive: None, progress: false };
+        let settings = RenderSettings::new(320, 240, 1, 0);
         let a = render::render(&camera, &NormalShading { scene: &scene, accel: native.as_ref() }, &settings).image;
         let b = render::render(&camera, &NormalShading { scene: &scene, accel: embree.as_ref() }, &settings).image;
         let (mut ties, mut last_bits, mut png_bytes) = (0, 0, 0);

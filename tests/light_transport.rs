@@ -261,7 +261,7 @@ fn render_stats(scene: &Scene, camera: &Camera, backend: BackendKind, m: u32, ac
     let accel = common::build(backend, &scene.shapes);
     let lights = Lights::from_scene(scene).unwrap();
     let integ = PathTracer { scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate, hemisphere, light_samples: 1, russian_roulette: rr };
-    let settings = RenderSettings { width: w, height: h, spp, seed, region: None, adaptive: None, progress: false };
+    let settings = RenderSettings::new(w, h, spp, seed);
     let out = render::render(camera, &integ, &settings);
     let lum = |c: Vec3| (c.x as f64 + c.y as f64 + c.z as f64) / 3.0;
     let pixels: Vec<(f64, f64)> = out.image.pixels.iter().zip(&out.variance.pixels).map(|(p, v)| (lum(*p), lum(*v) / 3.0)).collect();

@@ -5,7 +5,7 @@
 //! exported scene; only silhouette pixels may differ.
 
 use super::Integrator;
-use crate::accel::Traversal;
+use crate::accel::{Hit, Traversal};
 use crate::ray::Ray;
 use crate::rng::Rng;
 use glam::Vec3;
@@ -17,9 +17,12 @@ pub struct Depth<'a> {
 }
 
 impl Integrator for Depth<'_> {
-    fn radiance(&self, ray: &Ray, _rng: &mut Rng, rays: &mut u64) -> Vec3 {
-        *rays += 1;
-        match self.accel.intersect(ray) {
+    fn accel(&self) -> &dyn Traversal {
+        self.accel
+    }
+
+    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, _rng: &mut Rng, _rays: &mut u64) -> Vec3 {
+        match hit {
             Some(hit) => Vec3::splat(hit.t * ray.dir.length()),
             None => Vec3::ZERO,
         }
@@ -33,9 +36,12 @@ pub struct ObjectId<'a> {
 }
 
 impl Integrator for ObjectId<'_> {
-    fn radiance(&self, ray: &Ray, _rng: &mut Rng, rays: &mut u64) -> Vec3 {
-        *rays += 1;
-        match self.accel.intersect(ray) {
+    fn accel(&self) -> &dyn Traversal {
+        self.accel
+    }
+
+    fn radiance_from(&self, _ray: &Ray, hit: Option<Hit>, _rng: &mut Rng, _rays: &mut u64) -> Vec3 {
+        match hit {
             Some(hit) => id_colour(hit.geom_id),
             None => Vec3::ZERO,
         }

@@ -5,6 +5,7 @@ pub mod aov;
 pub mod normals;
 pub mod path;
 
+use crate::accel::{Hit, Traversal};
 use crate::camera::Camera;
 use crate::image_io::Rgb;
 use crate::ray::Ray;
@@ -17,9 +18,23 @@ use std::time::Instant;
 
 const TILE: u32 = 32;
 
-/// Radiance along one camera ray. `rays` counts every ray the estimate traces.
+/// Radiance along a camera ray. The image loop finds the camera rays' first
+/// hits itself, a tile of rays per call to the backend's coherent batch
+/// traversal, and hands each hit over: `rays` counts every ray the estimate
+/// traces *after* the camera ray.
 pub trait Integrator: Sync {
-    fn radiance(&self, ray: &Ray, rng: &mut Rng, rays: &mut u64) -> Vec3;
+    /// The traversal camera rays are traced with.
+    fn accel(&self) -> &dyn Traversal;
+
+    /// Radiance along `ray`, whose closest hit in `(tmin, tmax]` is `hit`.
+    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, rng: &mut Rng, rays: &mut u64) -> Vec3;
+
+    /// Radiance along `ray`, tracing it alone (counts it in `rays`).
+    fn radiance(&self, ray: &Ray, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+        *rays += 1;
+        let hit = self.accel().intersect(ray);
+        self.radiance_from(ray, hit, rng, rays)
+    }
 }
 
 /// A rectangle of the frame, in CS184's frame coordinates (x right, y up from
@@ -54,6 +69,15 @@ pub struct RenderSettings {
     pub region: Option<Region>,
     pub adaptive: Option<Adaptive>,
     pub progress: bool,
+    /// Trace each round of a tile's camera rays as one coherent batch (the
+    /// default) instead of one ray at a time. The image is the same either way.
+    pub batch_camera_rays: bool,
+}
+
+impl RenderSettings {
+    pub fn new(width: u32, height: u32, spp: u32, seed: u64) -> Self {
+        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_camera_rays: true }
+    }
 }
 
 pub struct RenderOutput {
@@ -82,7 +106,6 @@ struct PixelResult {
     mean: Vec3,
     var_of_mean: Vec3,
     samples: u32,
-    rays: u64,
 }
 
 /// Running per-pixel statistics over `n` samples.
@@ -93,67 +116,124 @@ struct Moments {
     n: u32,
 }
 
-/// Take up to `max` samples; with `rule`, stop early by CS184's criterion,
-/// checked every `batch` samples on the samples taken so far.
-fn sample_pixel(
-    camera: &Camera,
-    integ: &dyn Integrator,
-    s: &RenderSettings,
+/// One pixel's sampling state within a tile.
+struct PixelState {
     x: u32,
     y: u32,
-    rng: &mut Rng,
+    rng: Rng,
+    m: Moments,
+    /// Illuminance moments for the adaptive rule.
+    s1: f64,
+    s2: f64,
     max: u32,
-    rule: Option<Adaptive>,
-    rays: &mut u64,
-) -> Moments {
-    let (w, h) = (s.width as f32, s.height as f32);
-    let mut m = Moments { mean: Vec3::ZERO, m2: Vec3::ZERO, n: 0 };
-    // Illuminance moments for the adaptive rule.
-    let (mut s1, mut s2) = (0.0f64, 0.0f64);
-    while m.n < max {
-        let (jx, jy) = if s.spp == 1 { (0.5, 0.5) } else { rng.uniform2() };
-        let ray = camera.generate_ray((x as f32 + jx) / w, (y as f32 + jy) / h);
-        let l = integ.radiance(&ray, rng, rays);
+    done: bool,
+}
+
+impl PixelState {
+    fn new(x: u32, y: u32, rng: Rng, max: u32) -> Self {
+        PixelState { x, y, rng, m: Moments { mean: Vec3::ZERO, m2: Vec3::ZERO, n: 0 }, s1: 0.0, s2: 0.0, max, done: max == 0 }
+    }
+
+    /// Add a sample; with `rule`, stop by CS184's criterion, checked every
+    /// `batch` samples on the samples taken so far.
+    fn add(&mut self, l: Vec3, rule: Option<Adaptive>) {
+        let m = &mut self.m;
         m.n += 1;
         let d = l - m.mean;
         m.mean += d / m.n as f32;
         m.m2 += d * (l - m.mean);
         let il = illuminance(l) as f64;
-        s1 += il;
-        s2 += il * il;
+        self.s1 += il;
+        self.s2 += il * il;
         if let Some(a) = rule {
             if m.n % a.batch == 0 {
                 let nf = m.n as f64;
-                let mu = s1 / nf;
-                let var = ((s2 - s1 * s1 / nf) / (nf - 1.0)).max(0.0);
+                let mu = self.s1 / nf;
+                let var = ((self.s2 - self.s1 * self.s1 / nf) / (nf - 1.0)).max(0.0);
                 if 1.96 * var.sqrt() / nf.sqrt() <= a.tolerance as f64 * mu {
-                    break;
+                    self.done = true;
                 }
             }
         }
+        if m.n >= self.max {
+            self.done = true;
+        }
     }
-    m
+}
+
+/// Sample every pixel of a tile up to its `max` (or until `rule` stops it),
+/// in rounds: one camera ray per unfinished pixel per round, traced as one
+/// coherent batch. Each pixel draws from its own stream in the order a
+/// pixel-at-a-time loop would (jitter, then the path, sample after sample),
+/// so the image does not depend on batching, tiling or threads.
+fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: &mut [PixelState], rule: Option<Adaptive>, rays: &mut u64) {
+    let (w, h) = (s.width as f32, s.height as f32);
+    let accel = integ.accel();
+    let mut active: Vec<usize> = (0..px.len()).filter(|&i| !px[i].done).collect();
+    let mut batch: Vec<Ray> = Vec::with_capacity(active.len());
+    let mut hits: Vec<Option<Hit>> = Vec::with_capacity(active.len());
+    while !active.is_empty() {
+        batch.clear();
+        for &i in &active {
+            let p = &mut px[i];
+            let (jx, jy) = if s.spp == 1 { (0.5, 0.5) } else { p.rng.uniform2() };
+            batch.push(camera.generate_ray((p.x as f32 + jx) / w, (p.y as f32 + jy) / h));
+        }
+        hits.clear();
+        hits.resize(batch.len(), None);
+        if s.batch_camera_rays {
+            accel.intersect_coherent(&batch, &mut hits);
+        } else {
+            for (r, h) in batch.iter().zip(hits.iter_mut()) {
+                *h = accel.intersect(r);
+            }
+        }
+        *rays += batch.len() as u64;
+        for (k, &i) in active.iter().enumerate() {
+            let p = &mut px[i];
+            let l = integ.radiance_from(&batch[k], hits[k], &mut p.rng, rays);
+            p.add(l, rule);
+        }
+        active.retain(|&i| !px[i].done);
+    }
 }
 
 /// Seed tag of the pilot streams, so pilot samples never reuse image samples.
 const PILOT_TAG: u64 = 0x7069_6c6f_7420_5f5f;
 
-fn render_pixel(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, x: u32, y: u32) -> PixelResult {
-    let mut rng = Rng::for_pixel(s.seed, x, y);
+/// The pixels `(x, y)` of one tile, in frame coordinates.
+fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixels: &[(u32, u32)]) -> (Vec<PixelResult>, u64) {
     let mut rays = 0u64;
-    let m = match s.adaptive {
+    let fresh = |max: &dyn Fn(usize) -> u32| -> Vec<PixelState> {
+        pixels.iter().enumerate().map(|(i, &(x, y))| PixelState::new(x, y, Rng::for_pixel(s.seed, x, y), max(i))).collect()
+    };
+    let px = match s.adaptive {
         Some(a) if a.pilot => {
             // Kirk and Arvo's two-stage sampling: decide the count on pilot
             // samples, throw them away, average fresh ones. The stopping
             // decision is then independent of the samples averaged: unbiased.
-            let mut pilot = Rng::for_pixel(s.seed ^ PILOT_TAG, x, y);
-            let n = sample_pixel(camera, integ, s, x, y, &mut pilot, s.spp, Some(a), &mut rays).n;
-            sample_pixel(camera, integ, s, x, y, &mut rng, n, None, &mut rays)
+            let mut pilot: Vec<PixelState> =
+                pixels.iter().map(|&(x, y)| PixelState::new(x, y, Rng::for_pixel(s.seed ^ PILOT_TAG, x, y), s.spp)).collect();
+            sample_tile(camera, integ, s, &mut pilot, Some(a), &mut rays);
+            let mut px = fresh(&|i| pilot[i].m.n);
+            sample_tile(camera, integ, s, &mut px, None, &mut rays);
+            px
         }
-        rule => sample_pixel(camera, integ, s, x, y, &mut rng, s.spp, rule, &mut rays),
+        rule => {
+            let mut px = fresh(&|_| s.spp);
+            sample_tile(camera, integ, s, &mut px, rule, &mut rays);
+            px
+        }
     };
-    let var_of_mean = if m.n > 1 { m.m2 / (m.n as f32 * (m.n - 1) as f32) } else { Vec3::ZERO };
-    PixelResult { mean: m.mean, var_of_mean, samples: m.n, rays }
+    let out = px
+        .iter()
+        .map(|p| {
+            let m = &p.m;
+            let var_of_mean = if m.n > 1 { m.m2 / (m.n as f32 * (m.n - 1) as f32) } else { Vec3::ZERO };
+            PixelResult { mean: m.mean, var_of_mean, samples: m.n }
+        })
+        .collect();
+    (out, rays)
 }
 
 /// Render `settings.region` (or the whole frame) with `integ`.
@@ -175,19 +255,20 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
     };
     // Local (x, y) count from the region's top-left; the frame's y runs up
     // from the bottom, so local row ly is frame row region.y + region.h - 1 - ly.
-    let done: Vec<Vec<(u32, u32, PixelResult)>> = tiles
+    let done: Vec<(Vec<(u32, u32)>, Vec<PixelResult>, u64)> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
-            let mut out = Vec::with_capacity((TILE * TILE) as usize);
+            let mut local = Vec::with_capacity((TILE * TILE) as usize);
+            let mut frame = Vec::with_capacity((TILE * TILE) as usize);
             for ly in ty..(ty + TILE).min(region.h) {
                 for lx in tx..(tx + TILE).min(region.w) {
-                    let fx = region.x + lx;
-                    let fy = region.y + region.h - 1 - ly;
-                    out.push((lx, ly, render_pixel(camera, integ, settings, fx, fy)));
+                    local.push((lx, ly));
+                    frame.push((region.x + lx, region.y + region.h - 1 - ly));
                 }
             }
+            let (results, rays) = render_tile(camera, integ, settings, &frame);
             bar.inc(1);
-            out
+            (local, results, rays)
         })
         .collect();
     bar.finish_and_clear();
@@ -195,14 +276,14 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
     let mut variance = Rgb::new(region.w, region.h);
     let mut samples = vec![0u32; (region.w * region.h) as usize];
     let mut rays = 0;
-    for tile in done {
-        for (lx, ly, p) in tile {
+    for (local, results, tile_rays) in done {
+        for ((lx, ly), p) in local.into_iter().zip(results) {
             let i = (ly * region.w + lx) as usize;
             image.pixels[i] = p.mean;
             variance.pixels[i] = p.var_of_mean;
             samples[i] = p.samples;
-            rays += p.rays;
         }
+        rays += tile_rays;
     }
     RenderOutput { image, variance, samples, rays, seconds: start.elapsed().as_secs_f64() }
 }

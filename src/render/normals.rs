@@ -1,7 +1,7 @@
 //! Normal shading: the shading normal mapped to a colour, `n * 0.5 + 0.5`.
 
 use super::Integrator;
-use crate::accel::Traversal;
+use crate::accel::{Hit, Traversal};
 use crate::ray::Ray;
 use crate::rng::Rng;
 use crate::scene::{Interaction, Scene};
@@ -13,9 +13,12 @@ pub struct NormalShading<'a> {
 }
 
 impl Integrator for NormalShading<'_> {
-    fn radiance(&self, ray: &Ray, _rng: &mut Rng, rays: &mut u64) -> Vec3 {
-        *rays += 1;
-        match self.accel.intersect(ray) {
+    fn accel(&self) -> &dyn Traversal {
+        self.accel
+    }
+
+    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, _rng: &mut Rng, _rays: &mut u64) -> Vec3 {
+        match hit {
             Some(hit) => Interaction::new(self.scene, ray, &hit).ns * 0.5 + Vec3::splat(0.5),
             None => Vec3::ZERO,
         }

@@ -19,7 +19,7 @@
 //! samples. Both modes therefore estimate the same integral.
 
 use super::Integrator;
-use crate::accel::Traversal;
+use crate::accel::{Hit, Traversal};
 use crate::light::{emitted, Light, Lights, Target};
 use crate::ray::Ray;
 use crate::rng::Rng;
@@ -166,11 +166,15 @@ impl PathTracer<'_> {
 }
 
 impl Integrator for PathTracer<'_> {
-    fn radiance(&self, camera_ray: &Ray, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+    fn accel(&self) -> &dyn Traversal {
+        self.accel
+    }
+
+    fn radiance_from(&self, camera_ray: &Ray, hit: Option<Hit>, rng: &mut Rng, rays: &mut u64) -> Vec3 {
         let m = self.max_depth;
         let counts = |bounce: u32| self.accumulate || bounce == m;
         let wo = -camera_ray.dir.normalize();
-        let Some(it) = self.trace(camera_ray, rays) else {
+        let Some(it) = hit.map(|h| Interaction::new(self.scene, camera_ray, &h)) else {
             return if counts(0) { self.lights.escaped(-wo) } else { Vec3::ZERO };
         };
         let mut l = if counts(0) { emitted(self.scene, &it, wo) } else { Vec3::ZERO };
