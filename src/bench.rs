@@ -372,6 +372,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let _ = writeln!(md, "| scene | prims | backend | build ms | MiB | B/prim | camera 1T | camera {all}T | shadow 1T | shadow {all}T | random 1T | random {all}T |");
     let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut render_rows = String::new();
+    let mut sah_rows = String::new();
     #[allow(unused_mut)]
     let mut mode_rows = String::new();
     for name in &names {
@@ -413,6 +414,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             if thread_counts.len() == 1 {
                 // Keep the table's columns: repeat the single-thread figure.
                 cells = cells.iter().flat_map(|&c| [c, c]).collect();
+            }
+            if let Some((nodes, leaves)) = a.sah_cost() {
+                let _ = writeln!(sah_rows, "| {} | {} | {:.3} | {:.3} | {:.3} |", scene.name, kind, nodes, leaves, nodes + leaves);
             }
             let mem = a.memory_bytes() as f64;
             let _ = writeln!(
@@ -460,6 +464,17 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if !ratios.is_empty() {
         let _ = writeln!(md, "\nnative ÷ Embree throughput, from this run:\n");
         md.push_str(&ratios);
+    }
+    if !sah_rows.is_empty() {
+        let _ = writeln!(
+            md,
+            "\nSAH cost of the native tree, counted as Embree's BVH statistics count it (PATHTRACER_EMBREE_CONFIG=verbose=2 prints Embree's): \
+             expected node visits + expected 4-triangle block tests per ray through the root box. The node part depends on the width \
+             (Embree builds 8-wide here), the leaf part on the build:\n"
+        );
+        let _ = writeln!(md, "| scene | backend | nodes | leaves | total |");
+        let _ = writeln!(md, "|---|---|---:|---:|---:|");
+        md.push_str(&sah_rows);
     }
     if !mode_rows.is_empty() {
         let _ = writeln!(md, "\nEmbree batch calls, 1 thread, Mrays/s (loop of rtcIntersect1 / rtcIntersect1M stream / rtcIntersect8 packets):\n");

@@ -130,7 +130,15 @@ mod present {
 
     impl EmbreeBackend {
         pub fn build(shapes: &[Shape], threads: usize) -> Result<Self> {
-            let config = if threads > 0 { format!("threads={threads}") } else { String::new() };
+            let mut config = if threads > 0 { format!("threads={threads}") } else { String::new() };
+            // Extra device settings for measurements, e.g. "verbose=2" prints
+            // Embree's BVH statistics (its SAH cost) after each build.
+            if let Ok(extra) = std::env::var("PATHTRACER_EMBREE_CONFIG") {
+                if !config.is_empty() && !extra.is_empty() {
+                    config.push(',');
+                }
+                config.push_str(&extra);
+            }
             let c = CString::new(config).unwrap();
             let device = unsafe { ffi::pt_device_new(c.as_ptr()) };
             if device.is_null() {

@@ -68,6 +68,12 @@ pub trait Traversal: Send + Sync {
     /// Bytes of acceleration structure and primitive data owned by the backend.
     fn memory_bytes(&self) -> usize;
 
+    /// The tree's SAH cost as (node part, leaf part), counted as Embree's
+    /// `verbose=2` statistics count it; `None` where the backend cannot say.
+    fn sah_cost(&self) -> Option<(f64, f64)> {
+        None
+    }
+
     /// The closest hit in range, or `None`.
     fn intersect(&self, ray: &Ray) -> Option<Hit>;
 
