@@ -19,10 +19,18 @@ use glam::Vec3;
 const WIDTH: usize = 4;
 const EMPTY: u32 = u32::MAX;
 const LEAF_BIT: u32 = 1 << 31;
+/// A leaf of triangles only, up to three groups, described by the child code
+/// itself: `LEAF_BIT | INLINE_BIT | n_groups << 28 | first group`. Traversal
+/// then goes from the node straight to the triangle data: the profile of
+/// random rays on a 1M-triangle mesh spent 12 % of its samples waiting for
+/// the separate leaf record.
+const INLINE_BIT: u32 = 1 << 30;
+const INLINE_GROUP_LIMIT: u32 = (1 << 28) - 1;
 const STACK: usize = 256;
 
 /// Four children's boxes in SoA form, and what each child is: a node index,
-/// a leaf (`LEAF_BIT | leaf index`) or `EMPTY`. 128 bytes, two cache lines.
+/// a leaf (`LEAF_BIT | leaf record index`, or an inline leaf, see
+/// `INLINE_BIT`) or `EMPTY`. 128 bytes, two cache lines.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node4 {
@@ -130,7 +138,7 @@ impl Bvh4 {
         let mut stack = vec![(code, root)];
         while let Some((c, area)) = stack.pop() {
             if c & LEAF_BIT != 0 {
-                let l = &self.leaves[(c & !LEAF_BIT) as usize];
+                let l = self.leaf_of(c);
                 cost.leaves += area / root * (l.n_groups + l.n_spheres) as f64;
                 continue;
             }
@@ -166,8 +174,22 @@ impl Bvh4 {
             self.groups.push(g);
         }
         let leaf = Leaf { group, n_groups: self.groups.len() as u32 - group, sphere, n_spheres: self.spheres.len() as u32 - sphere };
+        if leaf.n_spheres == 0 && leaf.n_groups <= 3 && group < INLINE_GROUP_LIMIT {
+            return LEAF_BIT | INLINE_BIT | leaf.n_groups << 28 | group;
+        }
         self.leaves.push(leaf);
+        assert!(self.leaves.len() < INLINE_BIT as usize, "too many leaf records");
         LEAF_BIT | (self.leaves.len() as u32 - 1)
+    }
+
+    /// The leaf a child code (with `LEAF_BIT`) stands for.
+    #[inline(always)]
+    fn leaf_of(&self, code: u32) -> Leaf {
+        if code & INLINE_BIT != 0 {
+            Leaf { group: code & INLINE_GROUP_LIMIT, n_groups: (code >> 28) & 3, sphere: 0, n_spheres: 0 }
+        } else {
+            self.leaves[(code & !LEAF_BIT) as usize]
+        }
     }
 
     /// Intersect a leaf; `visit(hit)` returns true to stop.
@@ -213,9 +235,9 @@ impl Bvh4 {
         let mut cur = self.root;
         loop {
             if cur & LEAF_BIT != 0 {
-                let leaf = &self.leaves[(cur & !LEAF_BIT) as usize];
+                let leaf = self.leaf_of(cur);
                 let mut stop = false;
-                self.leaf(leaf, ray, &rt, &shear, tmax, &mut |h| {
+                self.leaf(&leaf, ray, &rt, &shear, tmax, &mut |h| {
                     stop = visit(h, &mut tmax);
                     stop
                 });
@@ -376,7 +398,7 @@ impl Bvh4 {
         loop {
             let lanes_here = lanes_in & p.active;
             if lanes_here != 0 && cur & LEAF_BIT != 0 {
-                let leaf = &self.leaves[(cur & !LEAF_BIT) as usize];
+                let leaf = &self.leaf_of(cur);
                 let mut lanes = lanes_here;
                 while lanes != 0 {
                     let l = lanes.trailing_zeros() as usize;
