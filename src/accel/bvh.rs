@@ -8,6 +8,7 @@
 use super::prims::Prim;
 use crate::geometry::Aabb;
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// At most this many primitives per leaf; below it the SAH decides.
 const MAX_LEAF: usize = 8;
@@ -16,6 +17,12 @@ const BINS: usize = 16;
 const TRAVERSAL_COST: f32 = 1.0;
 /// Subtrees with more primitives than this are built in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
+/// Nodes with more primitives than this are also binned in parallel (the top
+/// levels, where the subtree parallelism has not started yet), in chunks of
+/// `BIN_CHUNK`. Bin counts and box unions are exact, so the tree does not
+/// depend on the thread count.
+const PARALLEL_BINNING: usize = 1 << 16;
+const BIN_CHUNK: usize = 1 << 14;
 /// Past this depth splits are medians: at most 32 more levels, so the
 /// traversal stacks in `bvh4` are bounded.
 const MAX_SAH_DEPTH: usize = 64;
@@ -64,13 +71,25 @@ pub(super) fn build_tree(prims: &[Prim]) -> Option<(BuildNode, Vec<u32>)> {
 /// Ize's conservative factor, 1 + 2*gamma(3) with gamma(n) = n*eps/(1 - n*eps).
 pub(super) const ROBUST_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
-fn build_recursive(refs: &mut [PrimRef], offset: usize, depth: usize) -> BuildNode {
-    let mut bounds = Aabb::EMPTY;
-    let mut cbounds = Aabb::EMPTY;
-    for r in refs.iter() {
-        bounds = bounds.union(&r.bounds);
-        cbounds.grow(r.centroid);
+/// Bounds of the primitives and of their centroids.
+fn ref_bounds(refs: &[PrimRef]) -> (Aabb, Aabb) {
+    let one = |refs: &[PrimRef]| {
+        let (mut b, mut c) = (Aabb::EMPTY, Aabb::EMPTY);
+        for r in refs {
+            b = b.union(&r.bounds);
+            c.grow(r.centroid);
+        }
+        (b, c)
+    };
+    if refs.len() > PARALLEL_BINNING {
+        refs.par_chunks(BIN_CHUNK).map(one).reduce(|| (Aabb::EMPTY, Aabb::EMPTY), |a, b| (a.0.union(&b.0), a.1.union(&b.1)))
+    } else {
+        one(refs)
     }
+}
+
+fn build_recursive(refs: &mut [PrimRef], offset: usize, depth: usize) -> BuildNode {
+    let (bounds, cbounds) = ref_bounds(refs);
     let n = refs.len();
     if n == 1 {
         return BuildNode::Leaf { bounds, first: offset, count: 1 };
@@ -112,26 +131,61 @@ fn bin_index(c: f32, lo: f32, scale: f32) -> usize {
     (((c - lo) * scale) as usize).min(BINS - 1)
 }
 
+/// Per axis, how many centroids fall in each bin and the union of their boxes.
+#[derive(Clone, Copy)]
+struct Bins {
+    counts: [[usize; BINS]; 3],
+    boxes: [[Aabb; BINS]; 3],
+}
+
+impl Bins {
+    const EMPTY: Bins = Bins { counts: [[0; BINS]; 3], boxes: [[Aabb::EMPTY; BINS]; 3] };
+
+    fn fill(refs: &[PrimRef], lo: Vec3, scale: [f32; 3]) -> Bins {
+        let mut b = Bins::EMPTY;
+        for r in refs {
+            for axis in 0..3 {
+                if scale[axis] > 0.0 {
+                    let i = bin_index(r.centroid[axis], lo[axis], scale[axis]);
+                    b.counts[axis][i] += 1;
+                    b.boxes[axis][i] = b.boxes[axis][i].union(&r.bounds);
+                }
+            }
+        }
+        b
+    }
+
+    fn merge(mut self, o: Bins) -> Bins {
+        for axis in 0..3 {
+            for i in 0..BINS {
+                self.counts[axis][i] += o.counts[axis][i];
+                self.boxes[axis][i] = self.boxes[axis][i].union(&o.boxes[axis][i]);
+            }
+        }
+        self
+    }
+}
+
 /// Best binned-SAH split as `(axis, last bin of the left side, cost)`, or
 /// `None` when making a leaf is cheaper (only allowed for small nodes).
 fn find_split(refs: &[PrimRef], bounds: &Aabb, cbounds: &Aabb) -> Option<(usize, usize, f32)> {
     let n = refs.len();
     let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
+    let extent = cbounds.extent();
+    // Axes without extent get scale 0 and are skipped.
+    let scale = [0, 1, 2].map(|a| if extent[a] > 0.0 { BINS as f32 / extent[a] } else { 0.0 });
+    let lo = cbounds.min;
+    let bins = if n > PARALLEL_BINNING {
+        refs.par_chunks(BIN_CHUNK).map(|c| Bins::fill(c, lo, scale)).reduce(|| Bins::EMPTY, Bins::merge)
+    } else {
+        Bins::fill(refs, lo, scale)
+    };
     let mut best: Option<(usize, usize, f32)> = None;
     for axis in 0..3 {
-        let extent = cbounds.extent()[axis];
-        if !(extent > 0.0) {
+        if !(extent[axis] > 0.0) {
             continue;
         }
-        let lo = cbounds.min[axis];
-        let scale = BINS as f32 / extent;
-        let mut counts = [0usize; BINS];
-        let mut boxes = [Aabb::EMPTY; BINS];
-        for r in refs {
-            let b = bin_index(r.centroid[axis], lo, scale);
-            counts[b] += 1;
-            boxes[b] = boxes[b].union(&r.bounds);
-        }
+        let (counts, boxes) = (&bins.counts[axis], &bins.boxes[axis]);
         // Sweep from the right to get the area*count of every right side.
         let mut right_cost = [0.0f32; BINS];
         let mut acc = Aabb::EMPTY;
