@@ -131,6 +131,7 @@ TIERS = {
         geometry("hard_tiny.dae"),
         geometry("hard_huge.dae"),
         geometry("hard_slab.dae"),
+        geometry("hard_grazing.dae"),
     ]),
 }
 
@@ -676,6 +677,17 @@ def svg_curves(series, width=360, height=240):
     return "".join(parts)
 
 
+def region_cell(r):
+    """The region whose mean differs most, as ours ± CI vs the reference's, in a tooltip-free
+    compact form; every region is in summary.json."""
+    regs = r.get("regions") or []
+    if not regs:
+        return "-"
+    g = max(regs, key=lambda q: abs(q["z"]))
+    return (f"{len(regs)} regions, worst z {g['z']:+.2f}:<br>{g['mean']:.4f}&plusmn;{g['ci95']:.4f} vs "
+            f"{g['reference_mean']:.4f}&plusmn;{g['reference_ci95']:.4f}")
+
+
 def write_report(out, summary):
     esc = html.escape
     rad = [r for r in summary["results"] if r["kind"] in ("radiance", "adaptive")]
@@ -686,14 +698,14 @@ def write_report(out, summary):
     for r in rad:
         title = esc(r["case"] + (f" ({r['label']})" if r.get("label") else ""))
         if "refused" in r:
-            rows.append(f"<tr data-result><td>{title}</td><td>-</td><td>{esc(r['reference'])}</td><td class='refused' colspan='10'>reference refuses: {esc(r['refused'])}</td></tr>")
+            rows.append(f"<tr data-result><td>{title}</td><td>-</td><td>{esc(r['reference'])}</td><td class='refused' colspan='11'>reference refuses: {esc(r['refused'])}</td></tr>")
             continue
         c = r["case"]
         flip = f"{r['flip']:.4f}" if r.get("flip") is not None else "n/a"
         rows.append(
             f"<tr data-result><td>{title}</td><td>{r['backend']}</td><td>{esc(r['reference_renderer'])}</td><td class='{'pass' if r['passed'] else 'fail'}'>{'pass' if r['passed'] else 'FAIL'}</td>"
             f"<td>{100 * r['pass_fraction']:.2f} %</td><td>{r['global_z']:+.2f}</td><td>{100 * (r['relative_mean_difference'] or 0):+.3f} %</td><td>{r['rel_mse']:.2e}</td>"
-            f"<td>{r['smape']:.4f}</td><td>{flip}</td><td><img src='{esc(c)}/{r['backend']}.png'></td><td><img src='{esc(c)}/{r['reference']}.png'></td>"
+            f"<td>{r['smape']:.4f}</td><td>{flip}</td><td>{region_cell(r)}</td><td><img src='{esc(c)}/{r['backend']}.png'></td><td><img src='{esc(c)}/{r['reference']}.png'></td>"
             f"<td><img src='{esc(c)}/{r['backend']}_{r['reference']}_z.png'></td></tr>")
     grows = []
     for r in geo:
@@ -741,9 +753,10 @@ document.body.dataset.images = imgs.length; document.body.dataset.imagesOk = img
 <h2>Light transport</h2>
 <p>Verdict: per pixel-channel Welch z-test (alpha 0.01, Šidák), pass at &ge; 99.75 % of pixel-channels, plus a global test of the
 image mean by batch means (ours: {BATCHES} independent renders, the reference: its independent renders; Student t, alpha 0.01).
-z-map: blue z &le; -4, white 0, red z &ge; 4. FLIP: mean LDR FLIP of the tone-mapped images (report only).</p>
+z-map: blue z &le; -4, white 0, red z &ge; 4. FLIP: mean LDR FLIP of the tone-mapped images (report only). Regions: a 4&times;3 grid of
+region means with 95 % confidence intervals (report only; all in summary.json).</p>
 <table id="verdicts"><tr><th>case</th><th>backend</th><th>reference</th><th>verdict</th><th>pixels passing</th><th>global t</th><th>mean diff</th>
-<th>relMSE</th><th>SMAPE</th><th>FLIP</th><th>ours</th><th>reference</th><th>z-map</th></tr>
+<th>relMSE</th><th>SMAPE</th><th>FLIP</th><th>regions</th><th>ours</th><th>reference</th><th>z-map</th></tr>
 {''.join(rows)}</table>
 <h2>Intersections</h2>
 <p>POV-Ray: one ray through each pixel centre (ours at -s 1); ids must be identical except on silhouettes (a differently coloured
