@@ -387,47 +387,59 @@ class Harness:
         for rname, ref in refs.items():
             write_png(os.path.join(folder, f"{rname}.png"), to_png(ref["mean"]))
         for backend in self.backends:
-            # 1. The converged image: 8 independent adaptive renders at the full maximum.
-            xs, vs, kept = [], [], []
-            t0 = time.time()
-            for b in range(BATCHES):
-                exr, var = (os.path.join(folder, f"{backend}_a_b{b}{e}.exr") for e in ("", "_var"))
-                text = sh([self.pt, *scene_args, *self.view, "-s", str(S), *a_flags, "-m", str(case["m"]), "--backend", backend, "--seed", str(7 + b),
-                           "-f", os.path.join(folder, f"{backend}_a_b{b}.png"), "--exr", exr, "--variance-exr", var])
-                xs.append(read_exr(exr))
-                vs.append(read_exr(var))
-                kept.append(float(text.split("samples kept (")[1].split("/px")[0]))
-            seconds = time.time() - t0
-            x, var_x = np.mean(xs, 0), np.mean(vs, 0) / BATCHES
-            write_png(os.path.join(folder, f"{backend}.png"), to_png(x))
-            shutil.copy(os.path.join(folder, f"{backend}_a_b0_rate.png"), os.path.join(folder, f"{backend}_rate.png"))
-            # 2. Uniform sampling at S/8 .. S against one adaptive render, at equal error.
-            ladder = [S // 8, S // 4, S // 2, S]
+            # Uniform sampling at S/8 .. S, for "samples saved at equal error".
             uni = []
-            for n in ladder:
+            for n in [S // 8, S // 4, S // 2, S]:
                 exr = os.path.join(folder, f"{backend}_u{n}.exr")
                 text = sh([self.pt, *scene_args, *self.view, "-s", str(n), "-m", str(case["m"]), "--backend", backend, "--seed", str(300 + n), "-f", os.path.join(folder, f"{backend}_u{n}.png"), "--exr", exr])
                 uni.append((n, float(text.split("| render ")[1].split(" s")[0]), read_exr(exr)))
-            exr = os.path.join(folder, f"{backend}_a1.exr")
-            text = sh([self.pt, *scene_args, *self.view, "-s", str(S), *a_flags, "-m", str(case["m"]), "--backend", backend, "--seed", "299", "-f", os.path.join(folder, f"{backend}_a1.png"), "--exr", exr])
-            a_spp = float(text.split("samples kept (")[1].split("/px")[0])
-            a_sec = float(text.split("| render ")[1].split(" s")[0])
-            a_img = read_exr(exr)
-            for rname, ref in refs.items():
-                v = stats.verdict(x, var_x, ref["mean"], ref["var"], [float(i.mean()) for i in xs], ref["image_means"])
-                write_zmap(os.path.join(folder, f"{backend}_{rname}_z.png"), v.pop("z_image"))
-                ucurve = [{"spp": n, "seconds": sec, "rel_mse": rel_mse(img, ref["mean"])} for n, sec, img in uni]
-                a_err = rel_mse(a_img, ref["mean"])
-                eq_spp = interp_loglog([(p["rel_mse"], p["spp"]) for p in ucurve], a_err)
-                eq_sec = interp_loglog([(p["rel_mse"], p["seconds"]) for p in ucurve], a_err)
-                v.update({"kind": "adaptive", "case": cid, "label": f"adaptive -a {case['batch']} {case['tol']} -s {S}", "scene": name, "max_depth": case["m"], "flags": a_flags,
-                          "backend": backend, "reference": rname, "reference_renderer": ref["renderer"], "spp": S, "mean_samples_kept": float(np.mean(kept)), "seconds": seconds,
-                          "uniform_curve": ucurve, "adaptive_single": {"samples_per_pixel": a_spp, "seconds": a_sec, "rel_mse": a_err},
-                          "uniform_spp_at_equal_error": eq_spp, "samples_saved": (1 - a_spp / eq_spp) if eq_spp else None,
-                          "uniform_seconds_at_equal_error": eq_sec, "time_saved": (1 - a_sec / eq_sec) if eq_sec else None})
-                results.append(v)
-                print(f"{cid} {backend} vs {rname}: {'PASS' if v['passed'] else 'FAIL'} pixels {v['pass_fraction']*100:.2f}% global t {v['global_z']:+.2f}; "
-                      f"{a_spp:.1f} spp/px vs uniform {eq_spp or float('nan'):.1f} at equal error")
+            for rule, extra in (("cs184", []), ("pilot", ["--adaptive-pilot"])):
+                # 1. The converged image: 8 independent adaptive renders at the full maximum.
+                xs, vs, kept = [], [], []
+                t0 = time.time()
+                for b in range(BATCHES):
+                    exr, var = (os.path.join(folder, f"{backend}_{rule}_b{b}{e}.exr") for e in ("", "_var"))
+                    text = sh([self.pt, *scene_args, *self.view, "-s", str(S), *a_flags, *extra, "-m", str(case["m"]), "--backend", backend, "--seed", str(7 + b),
+                               "-f", os.path.join(folder, f"{backend}_{rule}_b{b}.png"), "--exr", exr, "--variance-exr", var])
+                    xs.append(read_exr(exr))
+                    vs.append(read_exr(var))
+                    kept.append(float(text.split("samples kept (")[1].split("/px")[0]))
+                seconds = time.time() - t0
+                x, var_x = np.mean(xs, 0), np.mean(vs, 0) / BATCHES
+                tag = f"{backend}_{rule}"
+                write_png(os.path.join(folder, f"{tag}.png"), to_png(x))
+                shutil.copy(os.path.join(folder, f"{backend}_{rule}_b0_rate.png"), os.path.join(folder, f"{tag}_rate.png"))
+                # 2. One adaptive render against the uniform ones, at equal error.
+                exr = os.path.join(folder, f"{tag}_a1.exr")
+                text = sh([self.pt, *scene_args, *self.view, "-s", str(S), *a_flags, *extra, "-m", str(case["m"]), "--backend", backend, "--seed", "299",
+                           "-f", os.path.join(folder, f"{tag}_a1.png"), "--exr", exr])
+                a_spp = float(text.split("samples kept (")[1].split("/px")[0])
+                a_sec = float(text.split("| render ")[1].split(" s")[0])
+                a_img = read_exr(exr)
+                for rname, ref in refs.items():
+                    v = stats.verdict(x, var_x, ref["mean"], ref["var"], [float(i.mean()) for i in xs], ref["image_means"])
+                    write_zmap(os.path.join(folder, f"{tag}_{rname}_z.png"), v.pop("z_image"))
+                    ucurve = [{"spp": n, "seconds": sec, "rel_mse": rel_mse(img, ref["mean"])} for n, sec, img in uni]
+                    a_err = rel_mse(a_img, ref["mean"])
+                    eq_spp = interp_loglog([(p["rel_mse"], p["spp"]) for p in ucurve], a_err)
+                    eq_sec = interp_loglog([(p["rel_mse"], p["seconds"]) for p in ucurve], a_err)
+                    v.update({"kind": "adaptive", "case": cid, "rule": rule, "image": tag, "label": f"adaptive -a {case['batch']} {case['tol']} -s {S}, {rule} rule",
+                              "scene": name, "max_depth": case["m"], "flags": a_flags + extra,
+                              "backend": backend, "reference": rname, "reference_renderer": ref["renderer"], "spp": S, "mean_samples_kept": float(np.mean(kept)), "seconds": seconds,
+                              "uniform_curve": ucurve, "adaptive_single": {"samples_per_pixel": a_spp, "seconds": a_sec, "rel_mse": a_err},
+                              "uniform_spp_at_equal_error": eq_spp, "samples_saved": (1 - a_spp / eq_spp) if eq_spp else None,
+                              "uniform_seconds_at_equal_error": eq_sec, "time_saved": (1 - a_sec / eq_sec) if eq_sec else None})
+                    if rule == "cs184":
+                        # CS184's rule decides on the samples it keeps: its image is biased
+                        # dark by design (measured in the bias rows). Its verdict is reported;
+                        # the pilot rule's image and the bias rows are what must pass.
+                        v["verdict_passed"] = v["passed"]
+                        v["passed"] = True
+                        v["informational"] = "CS184's stopping rule is biased by design; reported, not a gate"
+                    results.append(v)
+                    vp = v.get("verdict_passed", v["passed"])
+                    print(f"{cid} {backend} {rule} rule vs {rname}: {'PASS' if vp else ('BIASED (expected)' if rule == 'cs184' else 'FAIL')} pixels {v['pass_fraction']*100:.2f}% "
+                          f"global t {v['global_z']:+.2f}; {a_spp:.1f} spp/px ({a_sec:.2f} s) vs uniform {eq_spp or float('nan'):.1f} ({eq_sec or float('nan'):.2f} s) at equal error")
             # 3. Bias of the stopping rules on a rare-path configuration.
             if direct:
                 rname, ref = next(iter(direct.items()))
@@ -701,12 +713,15 @@ def write_report(out, summary):
             rows.append(f"<tr data-result><td>{title}</td><td>-</td><td>{esc(r['reference'])}</td><td class='refused' colspan='11'>reference refuses: {esc(r['refused'])}</td></tr>")
             continue
         c = r["case"]
+        img = r.get("image", r["backend"])
         flip = f"{r['flip']:.4f}" if r.get("flip") is not None else "n/a"
+        ok = r.get("verdict_passed", r["passed"])
+        verdict, cls = ("pass", "pass") if ok else (("biased (expected)", "refused") if r.get("informational") else ("FAIL", "fail"))
         rows.append(
-            f"<tr data-result><td>{title}</td><td>{r['backend']}</td><td>{esc(r['reference_renderer'])}</td><td class='{'pass' if r['passed'] else 'fail'}'>{'pass' if r['passed'] else 'FAIL'}</td>"
+            f"<tr data-result><td>{title}</td><td>{r['backend']}</td><td>{esc(r['reference_renderer'])}</td><td class='{cls}'>{verdict}</td>"
             f"<td>{100 * r['pass_fraction']:.2f} %</td><td>{r['global_z']:+.2f}</td><td>{100 * (r['relative_mean_difference'] or 0):+.3f} %</td><td>{r['rel_mse']:.2e}</td>"
-            f"<td>{r['smape']:.4f}</td><td>{flip}</td><td>{region_cell(r)}</td><td><img src='{esc(c)}/{r['backend']}.png'></td><td><img src='{esc(c)}/{r['reference']}.png'></td>"
-            f"<td><img src='{esc(c)}/{r['backend']}_{r['reference']}_z.png'></td></tr>")
+            f"<td>{r['smape']:.4f}</td><td>{flip}</td><td>{region_cell(r)}</td><td><img src='{esc(c)}/{img}.png'></td><td><img src='{esc(c)}/{r['reference']}.png'></td>"
+            f"<td><img src='{esc(c)}/{img}_{r['reference']}_z.png'></td></tr>")
     grows = []
     for r in geo:
         imgs = "".join(f"<img src='{esc(r['case'])}/{esc(i)}'>" for i in r.get("images", []))
@@ -716,9 +731,9 @@ def write_report(out, summary):
     for r in ada:
         a = r["adaptive_single"]
         eq = r["uniform_spp_at_equal_error"]
-        arows.append(f"<tr><td>{esc(r['case'])}</td><td>{r['backend']}</td><td>{r['reference']}</td><td>{a['samples_per_pixel']:.1f} / {r['spp']}</td><td>{a['rel_mse']:.2e}</td>"
+        arows.append(f"<tr><td>{esc(r['case'])} ({r['rule']} rule)</td><td>{r['backend']}</td><td>{r['reference']}</td><td>{a['samples_per_pixel']:.1f} / {r['spp']}</td><td>{a['rel_mse']:.2e}</td>"
                      f"<td>{'%.1f' % eq if eq else 'outside the ladder'}</td><td>{'%.0f %%' % (100 * r['samples_saved']) if r['samples_saved'] is not None else '-'}</td>"
-                     f"<td>{'%.0f %%' % (100 * r['time_saved']) if r['time_saved'] is not None else '-'}</td><td><img src='{esc(r['case'])}/{r['backend']}_rate.png'></td></tr>")
+                     f"<td>{'%.0f %%' % (100 * r['time_saved']) if r['time_saved'] is not None else '-'}</td><td><img src='{esc(r['case'])}/{r['image']}_rate.png'></td></tr>")
     for r in bias:
         b = r["bias"]
         arows.append(f"<tr data-result><td>{esc(r['case'])}</td><td>{r['backend']}</td><td>{r['reference']}</td><td colspan='5' style='text-align:left'>stopping-rule bias, {esc(r['config'])}: "
@@ -765,7 +780,9 @@ coverage and interior depth and normal by the per-pixel z-test. Images: ours, re
 <table id="geometry"><tr><th>case</th><th>backend</th><th>reference</th><th>verdict</th><th>what was found</th><th>images</th></tr>{''.join(grows)}</table>
 <h2>Adaptive sampling</h2>
 <p>One adaptive render against uniform renders at 1/8 .. 1 of the maximum: the uniform spp (and time) at the adaptive render's
-relMSE, by log-log interpolation; samples saved = 1 - adaptive samples / uniform samples at equal error. The bias rows run a
+relMSE, by log-log interpolation; samples saved = 1 - adaptive samples kept / uniform samples at equal error (the pilot rule also
+spends its discarded pilot samples: compare its time saved). In the verdicts above, the CS184 rule's converged image is reported
+but not a gate: the rule decides on the samples it keeps, so its image is biased dark by design. The bias rows run a
 rare-path configuration many times with each stopping rule; the pilot rule must be unbiased, the CS184 rule's bias is reported.
 Image: the rate image (samples kept per pixel).</p>
 <table id="adaptive"><tr><th>case</th><th>backend</th><th>reference</th><th>spp kept / max</th><th>relMSE</th><th>uniform spp at equal error</th>
