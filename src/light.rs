@@ -108,7 +108,7 @@ impl Light {
             Light::Point { position, intensity } => {
                 let d = *position - p;
                 let r2 = d.length_squared();
-                // The shadow ray stops short of the light: by 32 ulps of its
+                // The shadow ray stops short of the light: by OFFSET_ULPS ulps of its
                 // position, as for area lights, and by at least 2^-13 of the
                 // distance. A point light sitting on a surface (CBempty's lies in
                 // the plane of its emissive quad) is then not shadowed by that

@@ -55,44 +55,65 @@ def adaptive(scene, m, refs, batch, tol, bias_runs):
     return {"kind": "adaptive", "scene": scene, "m": m, "refs": refs, "batch": batch, "tol": tol, "bias_runs": bias_runs, "ref_shift": None}
 
 
-def shift_export(src, dst, shift):
-    """A copy of an exported scene moved by `shift`, for references that lose precision far
-    from the origin (measured: at +8192, Mitsuba 3.9.1's spheres shadow themselves and Cycles
-    3.4's image is 30 % dark). Our f32 coordinates there are multiples of 2^-10, so
-    subtracting 8192 in f64 is exact and the references see exactly our rounded geometry, at
-    the origin."""
+def normalise_export(src, dst):
+    """A copy of an exported scene moved and scaled into the references' comfort zone: moved
+    by a multiple of 1024 towards the origin, then scaled by a power of two to a size of
+    about 2. Measured without it: at +8192, Mitsuba 3.9.1's spheres shadow themselves and
+    Cycles 3.4's stand-in rounds onto its lamp (30 % dark); at scale 1e-3 Mitsuba is 1.5 %
+    dark (its absolute epsilons). Both steps are exact in binary floating point (checked per
+    coordinate, refused otherwise), so the references still see exactly our rounded
+    geometry. Radiance does not change under the move and the uniform scale (point
+    intensities are scaled by s^2 to keep that true); depths scale by s."""
     os.makedirs(dst, exist_ok=True)
     with open(os.path.join(src, "scene.json")) as f:
         spec = json.load(f)
-    if shift == "recentre":
-        # Minus the camera's target region, rounded to a multiple of 1024: a power of two
-        # times an integer, so the subtraction stays exact.
-        pts = [s["center"] for s in spec["shapes"] if s["type"] == "sphere"]
-        for s in spec["shapes"]:
-            if s["type"] == "mesh":
-                with open(os.path.join(src, s["file"])) as f:
-                    pts += [[float(c) for c in line.split()[1:4]] for line in f if line.startswith("v ")]
-        shift = [-1024.0 * round(c / 1024.0) for c in np.mean(pts, axis=0)]
-    sv = np.asarray(shift, dtype=np.float64)
-    mv = lambda p: [float(a + b) for a, b in zip(p, sv)]
+    pts = [s["center"] for s in spec["shapes"] if s["type"] == "sphere"]
+    meshes = {}
+    for s in spec["shapes"]:
+        if s["type"] == "mesh":
+            with open(os.path.join(src, s["file"])) as f:
+                meshes[s["file"]] = f.read().splitlines()
+            pts += [[float(c) for c in line.split()[1:4]] for line in meshes[s["file"]] if line.startswith("v ")]
+    pts = np.asarray(pts, dtype=np.float64)
+    shift = -1024.0 * np.round(pts.mean(axis=0) / 1024.0)
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    scale = 2.0 ** round(np.log2(2.0 / extent)) if extent > 0 else 1.0
+
+    def mv(p):
+        out = []
+        for c in p:
+            q = (float(c) + shift[len(out)]) * scale
+            if float(np.float32(q)) != q or q / scale - shift[len(out)] != float(c):
+                sys.exit(f"run_cases: normalising {src}: coordinate {c!r} does not move exactly (shift {shift.tolist()}, scale {scale})")
+            out.append(q)
+        return out
+
     spec["camera"]["origin"] = mv(spec["camera"]["origin"])
-    spec["shifted_by"] = sv.tolist()
+    spec["camera"]["near"] *= scale
+    spec["camera"]["far"] *= scale
+    spec["normalised"] = {"shift": shift.tolist(), "scale": scale}
     for s in spec["shapes"]:
         if s["type"] == "sphere":
             s["center"] = mv(s["center"])
+            s["radius"] *= scale
         elif s["type"] == "mesh":
-            with open(os.path.join(src, s["file"])) as f, open(os.path.join(dst, s["file"]), "w") as g:
-                for line in f:
+            with open(os.path.join(dst, s["file"]), "w") as g:
+                for line in meshes[s["file"]]:
                     if line.startswith("v "):
-                        line = "v " + " ".join(repr(c) for c in mv(float(c) for c in line.split()[1:4])) + "\n"
-                    g.write(line)
+                        line = "v " + " ".join(repr(c) for c in mv(line.split()[1:4]))
+                    g.write(line + "\n")
     for l in spec["lights"]:
         for k in ("position", "corner"):
             if k in l:
                 l[k] = mv(l[k])
+        for k in ("ex", "ey"):
+            if k in l:
+                l[k] = [c * scale for c in l[k]]
+        if l["type"] == "point":
+            l["intensity"] = [c * scale * scale for c in l["intensity"]]
     with open(os.path.join(dst, "scene.json"), "w") as f:
         json.dump(spec, f, indent=1)
-    return dst
+    return dst, scale
 
 
 CB = "CBspheres_lambertian.dae"
@@ -105,7 +126,7 @@ TIERS = {
         radiance(CB, 1, ["cycles"], ["-H"], "hemisphere sampling", spp_scale=16),
         radiance(CB, 5, BOTH),
         radiance("CBempty.dae", 3, BOTH),
-        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="recentre"),
+        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="normalise"),
         adaptive(CB, 5, ["cycles"], 32, 0.05, 12),
         geometry(CB),
         geometry("hard_tiny.dae"),
@@ -120,16 +141,16 @@ TIERS = {
         radiance("CBbunny.dae", 5, BOTH),
         radiance("bunny.dae", 3, ["cycles"], label="hemisphere light"),
         adaptive(CB, 5, BOTH, 64, 0.05, 24),
-        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="recentre"),
-        radiance("hard_tiny.dae", 3, BOTH, label="hard case: scaled by 1e-3"),
-        radiance("hard_huge.dae", 3, BOTH, label="hard case: scaled by 1e3"),
+        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="normalise"),
+        radiance("hard_tiny.dae", 3, BOTH, label="hard case: scaled by 1e-3", ref_shift="normalise"),
+        radiance("hard_huge.dae", 3, BOTH, label="hard case: scaled by 1e3", ref_shift="normalise"),
         radiance("hard_grazing.dae", 3, BOTH, label="hard case: light 1e-4 under the ceiling"),
         radiance("hard_slab.dae", 3, BOTH, label="hard case: 1e-4-thick slab"),
         geometry(CB),
         geometry("CBbunny.dae"),
-        geometry("hard_offset.dae", ref_shift="recentre"),
-        geometry("hard_tiny.dae"),
-        geometry("hard_huge.dae"),
+        geometry("hard_offset.dae", ref_shift="normalise"),
+        geometry("hard_tiny.dae", ref_shift="normalise"),
+        geometry("hard_huge.dae", ref_shift="normalise"),
         geometry("hard_slab.dae"),
         geometry("hard_grazing.dae"),
     ]),
@@ -212,8 +233,9 @@ class Harness:
         scene = find_scene(case["scene"])
         sh([self.pt, "export", scene, *self.view, "--out", os.path.join(folder, "scene")])
         d = os.path.join(folder, "scene")
+        self.ref_scale = 1.0
         if case.get("ref_shift"):
-            d = shift_export(d, os.path.join(folder, "scene_ref"), case["ref_shift"])
+            d, self.ref_scale = normalise_export(d, os.path.join(folder, "scene_ref"))
         h = hashlib.sha256()
         for p in sorted(os.listdir(d)):
             with open(os.path.join(d, p), "rb") as f:
@@ -478,8 +500,13 @@ class Harness:
             if not os.path.exists(p):
                 sh([sys.executable, os.path.join(HERE, "pov_ref.py"), sc, "--mode", mode, "--out", p])
             pov[mode] = read_exr(p)
+        # Depths of a normalised reference scene are in its units.
+        pov["depth"] = pov["depth"] / self.ref_scale
         # Cycles: pixel averages over the box filter, independent renders.
         cyc = {mode: self.cycles(sc, key, 1, mode, spp=64, renders=8, ladder=[]) for mode in ("object-id", "depth", "normal")}
+        if "refused" not in cyc["depth"]:
+            d = cyc["depth"]
+            d["mean"], d["var"], d["renders"] = d["mean"] / self.ref_scale, d["var"] / self.ref_scale ** 2, [r / self.ref_scale for r in d["renders"]]
         for backend in self.backends:
             centre = {}
             for mode in ("object-id", "depth"):
