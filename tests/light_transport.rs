@@ -330,7 +330,7 @@ fn sealed_room_with_the_light_outside_is_exactly_black() {
         // a point light, and a hemisphere light: none may leak in. (At 16 spp
         // this passed by luck with hit points rounded past an edge, which
         // start rays outside the room; 64 spp found them, interaction.rs's
-        // pull_inside fixes them.)
+        // away_from_edges fixes them.)
         let y = offset.y + 1.01 * scale;
         let quad = TriangleMesh {
             positions: [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].iter().map(|&(x, z)| offset + Vec3::new(x * scale, 0.0, z * scale) + Vec3::Y * (y - offset.y)).collect(),
