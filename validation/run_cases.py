@@ -69,6 +69,7 @@ def normalise_export(src, dst):
         spec = json.load(f)
     pts = [s["center"] for s in spec["shapes"] if s["type"] == "sphere"]
     meshes = {}
+    # (the mean only picks the shift; exactness is checked per coordinate below)
     for s in spec["shapes"]:
         if s["type"] == "mesh":
             with open(os.path.join(src, s["file"])) as f:
@@ -82,10 +83,12 @@ def normalise_export(src, dst):
     def mv(p):
         out = []
         for c in p:
-            q = (float(c) + shift[len(out)]) * scale
-            if float(np.float32(q)) != q or q / scale - shift[len(out)] != float(c):
+            # Our coordinates are f32; the OBJ text is their shortest f32 spelling.
+            c = float(np.float32(float(c)))
+            q = (c + shift[len(out)]) * scale
+            if float(np.float32(q)) != q or q / scale - shift[len(out)] != c:
                 sys.exit(f"run_cases: normalising {src}: coordinate {c!r} does not move exactly (shift {shift.tolist()}, scale {scale})")
-            out.append(q)
+            out.append(float(q))
         return out
 
     spec["camera"]["origin"] = mv(spec["camera"]["origin"])
