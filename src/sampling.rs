@@ -72,12 +72,13 @@ impl Frame {
 /// How far, in ulps, a spawned ray starts off its surface. Spawned rays
 /// re-hit their own triangle at 0 ulps and never from 2 (tests/
 /// self_intersection.rs); pbrt's bound on the interpolated hit point's error
-/// is about 3.5 ulps of the largest coordinate. 8 keeps a margin over both.
-/// It was 32 until the validation harness's scene moved by 8192 came out
-/// 0.40 % brighter than the same scene at the origin: 32 ulps there are 3 cm
-/// in a 2 m box, enough to lift shadow rays out of contact shadows (8 ulps:
-/// +0.045 %, 4: +0.018 %, at 0.03 % noise).
-pub const OFFSET_ULPS: f32 = 8.0;
+/// is about 3.5 ulps of the largest coordinate. It was 32 until the
+/// validation harness's scene moved by 8192 came out 0.40 % brighter than the
+/// same scene at the origin: 32 ulps there are 3 cm in a 2 m box, enough to
+/// lift shadow rays out of contact shadows (8 ulps: +0.045 %; 4: no
+/// difference at 0.03 % noise). Hits rounded past an edge, which no step
+/// along the normal fixes, are handled in `scene::interaction`.
+pub const OFFSET_ULPS: f32 = 4.0;
 
 /// Move `p` off its surface along the unit geometric normal `n` (on the side
 /// the new ray leaves to) by `OFFSET_ULPS` ulps of `magnitude`, the largest

@@ -57,7 +57,7 @@ def adaptive(scene, m, refs, batch, tol, bias_runs):
 
 def normalise_export(src, dst):
     """A copy of an exported scene moved and scaled into the references' comfort zone: moved
-    by a multiple of 1024 towards the origin, then scaled by a power of two to a size of
+    by a multiple of 1024 (and of 4 extents) towards the origin, then scaled by a power of two to a size of
     about 2. Measured without it: at +8192, Mitsuba 3.9.1's spheres shadow themselves and
     Cycles 3.4's stand-in rounds onto its lamp (30 % dark); at scale 1e-3 Mitsuba is 1.5 %
     dark (its absolute epsilons). Both steps are exact in binary floating point (checked per
@@ -76,8 +76,11 @@ def normalise_export(src, dst):
                 meshes[s["file"]] = f.read().splitlines()
             pts += [[float(c) for c in line.split()[1:4]] for line in meshes[s["file"]] if line.startswith("v ")]
     pts = np.asarray(pts, dtype=np.float64)
-    shift = -1024.0 * np.round(pts.mean(axis=0) / 1024.0)
     extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    # Move by whole blocks of at least 1024 and 4 extents: only a scene far from the
+    # origin relative to its size moves at all.
+    block = max(1024.0, 2.0 ** np.ceil(np.log2(max(4.0 * extent, 1e-30))))
+    shift = -block * np.round(pts.mean(axis=0) / block)
     scale = 2.0 ** round(np.log2(2.0 / extent)) if extent > 0 else 1.0
 
     def mv(p):
