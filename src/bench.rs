@@ -493,7 +493,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let _ = writeln!(
             md,
             "\nPath-traced render, 480x360 (CS184 crop), 64 spp, -m 5, seed 1, {all} threads: camera rays traced per tile \
-             as one coherent batch (the renderer's default) or one at a time. Same image in every row of a scene:\n"
+             as one coherent batch (the renderer's default) or one at a time. Image: compared with the scene's first row, pixel by pixel:\n"
         );
         let _ = writeln!(md, "| scene | backend | camera rays | render s | rays | Mrays/s | image |");
         let _ = writeln!(md, "|---|---|---|---:|---:|---:|---|");
