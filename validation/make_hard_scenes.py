@@ -58,6 +58,22 @@ def grazing(text):
     return b
 
 
+def xyz_source(sid, values):
+    """A COLLADA <source> of XYZ triples."""
+    n = len(values) // 3
+    return f"""        <source id="{sid}">
+          <float_array id="{sid}-array" count="{len(values)}">{' '.join(values)}</float_array>
+          <technique_common>
+            <accessor source="#{sid}-array" count="{n}" stride="3">
+              <param name="X" type="float"/>
+              <param name="Y" type="float"/>
+              <param name="Z" type="float"/>
+            </accessor>
+          </technique_common>
+        </source>
+"""
+
+
 def slab(text):
     """A closed box 0.5 x 0.5 x 1e-4 (Z up, as the file) centred at (0, 0, 1.0), lambertian."""
     h, t, zc = 0.25, 0.5e-4, 1.0
@@ -73,27 +89,7 @@ def slab(text):
             tris.append(tri)
     geom = f"""    <geometry id="slab-mesh" name="slab">
       <mesh>
-        <source id="slab-mesh-positions">
-          <float_array id="slab-mesh-positions-array" count="{3 * len(v)}">{' '.join(f'{c:.9g}' for pt in v for c in pt)}</float_array>
-          <technique_common>
-            <accessor source="#slab-mesh-positions-array" count="{len(v)}" stride="3">
-              <param name="X" type="float"/>
-              <param name="Y" type="float"/>
-              <param name="Z" type="float"/>
-            </accessor>
-          </technique_common>
-        </source>
-        <source id="slab-mesh-normals">
-          <float_array id="slab-mesh-normals-array" count="{3 * len(normals)}">{' '.join(str(c) for n in normals for c in n)}</float_array>
-          <technique_common>
-            <accessor source="#slab-mesh-normals-array" count="{len(normals)}" stride="3">
-              <param name="X" type="float"/>
-              <param name="Y" type="float"/>
-              <param name="Z" type="float"/>
-            </accessor>
-          </technique_common>
-        </source>
-        <vertices id="slab-mesh-vertices">
+{xyz_source("slab-mesh-positions", [f'{c:.9g}' for pt in v for c in pt])}{xyz_source("slab-mesh-normals", [str(c) for n in normals for c in n])}        <vertices id="slab-mesh-vertices">
           <input semantic="POSITION" source="#slab-mesh-positions"/>
         </vertices>
         <polylist material="lambertian" count="{len(tris)}">
