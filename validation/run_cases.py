@@ -317,7 +317,8 @@ class Harness:
             imgs.append(a.reshape(a.shape[0] // S, S, a.shape[1] // S, S, 3).mean(axis=(1, 3)))
         stack = np.stack(imgs)
         return {"renderer": f"{meta['renderer']}, {n}x{n} lightlets, {S}x{S} rays/px", "mean": stack.mean(0), "var": stack.var(0, ddof=1) / len(imgs),
-                "image_means": [float(i.mean()) for i in imgs], "spp": S * S * len(imgs), "seconds": sum(p["seconds"] for p in meta["renders"]), "curve": []}
+                "image_means": [float(i.mean()) for i in imgs], "spp": S * S * len(imgs), "seconds": sum(p["seconds"] for p in meta["renders"]), "curve": [],
+                "renders": imgs}
 
     # ---- ours ----
 
@@ -365,11 +366,11 @@ class Harness:
             write_png(os.path.join(folder, f"{rname}.png"), to_png(ref["mean"]))
         for backend in self.backends:
             spp = self.t["spp"] * case["spp_scale"]
-            x, var_x, means_x, seconds, _ = self.ours(scene_args, folder, backend, args, spp, BATCHES, "img")
+            x, var_x, means_x, seconds, xs = self.ours(scene_args, folder, backend, args, spp, BATCHES, "img")
             write_png(os.path.join(folder, f"{backend}.png"), to_png(x))
             ladder_runs = self.ladder(scene_args, folder, backend, args)
             for rname, ref in refs.items():
-                v = stats.verdict(x, var_x, ref["mean"], ref["var"], means_x, ref["image_means"], spp, self.max_sample(folder, case))
+                v = stats.verdict(x, var_x, ref["mean"], ref["var"], means_x, ref["image_means"], spp, self.max_sample(folder, case), xs, ref.get("renders"))
                 z = v.pop("z_image")
                 write_zmap(os.path.join(folder, f"{backend}_{rname}_z.png"), z)
                 worst = np.argsort(-np.abs(z).max(-1), axis=None)[:8]
@@ -445,7 +446,7 @@ class Harness:
                 a_sec = float(text.split("| render ")[1].split(" s")[0])
                 a_img = read_exr(exr)
                 for rname, ref in refs.items():
-                    v = stats.verdict(x, var_x, ref["mean"], ref["var"], [float(i.mean()) for i in xs], ref["image_means"])
+                    v = stats.verdict(x, var_x, ref["mean"], ref["var"], [float(i.mean()) for i in xs], ref["image_means"], renders_x=xs, renders_r=ref.get("renders"))
                     write_zmap(os.path.join(folder, f"{tag}_{rname}_z.png"), v.pop("z_image"))
                     ucurve = [{"spp": n, "seconds": sec, "rel_mse": rel_mse(img, ref["mean"])} for n, sec, img in uni]
                     a_err = rel_mse(a_img, ref["mean"])
@@ -729,8 +730,8 @@ def region_cell(r):
     if not regs:
         return "-"
     g = max(regs, key=lambda q: abs(q["z"]))
-    return (f"{len(regs)} regions, worst z {g['z']:+.2f}:<br>{g['mean']:.4f}&plusmn;{g['ci95']:.4f} vs "
-            f"{g['reference_mean']:.4f}&plusmn;{g['reference_ci95']:.4f}")
+    return (f"{len(regs)} regions, worst z {g['z']:+.2f}:<br>{g['mean']:.5g}&plusmn;{g['ci95']:.2g} vs "
+            f"{g['reference_mean']:.5g}&plusmn;{g['reference_ci95']:.2g}")
 
 
 def write_report(out, summary):

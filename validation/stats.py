@@ -35,25 +35,36 @@ def z_critical(n):
     return NormalDist().inv_cdf(1.0 - alpha_pix / 2.0)
 
 
-def region_means(x, var_x, r, var_r, cols=4, rows=3):
+def region_means(x, var_x, r, var_r, xs=None, rs=None, cols=4, rows=3):
     """Means of a cols x rows grid of image regions (channels averaged), ours and the
-    reference's, each with a 95 % confidence half-width from the summed per-pixel variances
-    of the mean (pixels are sampled independently), and the z of their difference."""
+    reference's, each with a 95 % confidence half-width, and the z of their difference. The
+    standard error comes from the spread of the independent renders' region means where the
+    renders are given (`xs`, `rs`: POV-Ray's lightlet jitter is shared by all pixels of a
+    render, so its pixel errors are correlated), else from the summed per-pixel variances of
+    the mean (pixels sampled independently, as Mitsuba's are)."""
     h, w = x.shape[:2]
     out = []
+
+    def se_of(img_var, renders, sl):
+        if renders is not None and len(renders) > 1:
+            m = np.array([float(a[sl].mean()) for a in renders])
+            return float(m.std(ddof=1) / np.sqrt(m.size))
+        v = img_var[sl]
+        return float(np.sqrt(v.sum()) / v.size)
+
     for j in range(rows):
         for i in range(cols):
             y0, y1, x0, x1 = j * h // rows, (j + 1) * h // rows, i * w // cols, (i + 1) * w // cols
-            n = (y1 - y0) * (x1 - x0) * x.shape[2]
-            m, mr = float(x[y0:y1, x0:x1].mean()), float(r[y0:y1, x0:x1].mean())
-            se, ser = float(np.sqrt(var_x[y0:y1, x0:x1].sum()) / n), float(np.sqrt(var_r[y0:y1, x0:x1].sum()) / n)
+            sl = (slice(y0, y1), slice(x0, x1))
+            m, mr = float(x[sl].mean()), float(r[sl].mean())
+            se, ser = se_of(var_x, xs, sl), se_of(var_r, rs, sl)
             se_d = float(np.hypot(se, ser))
             out.append({"region": [x0, y0, x1, y1], "mean": m, "ci95": 1.96 * se, "reference_mean": mr, "reference_ci95": 1.96 * ser,
                         "z": (m - mr) / se_d if se_d > 0 else (0.0 if m == mr else float("inf"))})
     return out
 
 
-def verdict(x, var_x, r, var_r, batch_means_x, batch_means_r, spp=None, max_sample=None):
+def verdict(x, var_x, r, var_r, batch_means_x, batch_means_r, spp=None, max_sample=None, renders_x=None, renders_r=None):
     """`max_sample`, when the estimator's largest single-sample value is known (uniform
     hemisphere sampling at -m 1: 2·albedo·radiance), decides pixels where none of our `spp`
     samples was non-zero: their sample variance is 0, which is no evidence of precision. Such a
@@ -102,6 +113,6 @@ def verdict(x, var_x, r, var_r, batch_means_x, batch_means_r, spp=None, max_samp
         "rel_mse": rel_mse,
         "smape": smape,
         "passed": bool(frac >= PASS_FRACTION and abs(z_glob) <= z_glob_crit),
-        "regions": region_means(x, var_x, r, var_r),
+        "regions": region_means(x, var_x, r, var_r, renders_x, renders_r),
         "z_image": z,
     }
