@@ -15,5 +15,5 @@ echo "== test suite with Embree hidden (PATHTRACER_NO_EMBREE=1) =="
 # so this second pass skips it; everything else runs again.
 PATHTRACER_NO_EMBREE=1 CARGO_TARGET_DIR=target/no-embree cargo test --release -- --skip native_bvh_matches_brute_force
 
-echo "== validation harness, quick tier (Mitsuba 3 references) =="
+echo "== validation harness, quick tier (Mitsuba 3, Blender Cycles and POV-Ray references) =="
 bash validation/run quick
