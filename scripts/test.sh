@@ -2,7 +2,7 @@
 # The project's test command (README, CI): installs missing system packages,
 # runs the whole suite optimised with Embree, checks that a build with Embree
 # hidden from build.rs still passes the rest of the suite, then runs the
-# validation harness's quick tier (both backends against Mitsuba 3).
+# validation harness's quick tier (both backends against Mitsuba 3, Blender Cycles and POV-Ray).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
