@@ -92,13 +92,15 @@ pub const OFFSET_ULPS: f32 = 4.0;
 /// re-intersecting the same primitive scale with the primitive's coordinates,
 /// so we count ulps of those. No scene-dependent epsilon either way.
 pub fn offset_ray_origin(p: Vec3, n: Vec3, magnitude: f32) -> Vec3 {
-    let ulp = |x: f32| {
-        let x = x.abs().max(f32::MIN_POSITIVE);
-        f32::from_bits(x.to_bits() + 1) - x
-    };
     // Where a component of n is tiny its part of the step may round away;
     // the step along n itself is what keeps the ray off the surface.
     p + n * (OFFSET_ULPS * ulp(magnitude.max(p.abs().max_element())))
+}
+
+/// The spacing of f32 values at `|x|` (at least the smallest normal's).
+pub fn ulp(x: f32) -> f32 {
+    let x = x.abs().max(f32::MIN_POSITIVE);
+    f32::from_bits(x.to_bits() + 1) - x
 }
 
 /// The largest coordinate magnitude of a set of points.
@@ -129,8 +131,8 @@ mod tests {
             let q = offset_ray_origin(p, n, m);
             assert!(q.z > p.z && q.x == p.x && q.y == p.y, "{p} -> {q}");
             // OFFSET_ULPS ulps of the magnitude, give or take rounding of the sum.
-            let ulp = f32::from_bits(m.to_bits() + 1) - m;
-            assert!((q.z - p.z) >= 0.5 * OFFSET_ULPS * ulp && (q.z - p.z) <= 2.0 * OFFSET_ULPS * ulp, "{p}: moved {}", q.z - p.z);
+            let u = ulp(m);
+            assert!((q.z - p.z) >= 0.5 * OFFSET_ULPS * u && (q.z - p.z) <= 2.0 * OFFSET_ULPS * u, "{p}: moved {}", q.z - p.z);
             let q = offset_ray_origin(p, -n, m);
             assert!(q.z < p.z);
         }

@@ -28,13 +28,6 @@ pub trait Integrator: Sync {
 
     /// Radiance along `ray`, whose closest hit in `(tmin, tmax]` is `hit`.
     fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, rng: &mut Rng, rays: &mut u64) -> Vec3;
-
-    /// Radiance along `ray`, tracing it alone (counts it in `rays`).
-    fn radiance(&self, ray: &Ray, rng: &mut Rng, rays: &mut u64) -> Vec3 {
-        *rays += 1;
-        let hit = self.accel().intersect(ray);
-        self.radiance_from(ray, hit, rng, rays)
-    }
 }
 
 /// A rectangle of the frame, in CS184's frame coordinates (x right, y up from

@@ -4,7 +4,7 @@
 use super::{Scene, Shape};
 use crate::accel::Hit;
 use crate::geometry::{intersect_triangle, RayTransform};
-use crate::sampling::{magnitude, offset_ray_origin};
+use crate::sampling::{magnitude, offset_ray_origin, ulp};
 use crate::ray::Ray;
 use glam::Vec3;
 
@@ -70,8 +70,7 @@ const EDGE_ULPS: f32 = 4.0;
 /// origin leaked light through its edges at 64 spp. Points farther from the
 /// edges do not move, so shading elsewhere is unchanged.
 fn away_from_edges(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32, magnitude: f32) -> (f32, f32) {
-    let m = magnitude.abs().max(f32::MIN_POSITIVE);
-    let step = EDGE_ULPS * (f32::from_bits(m.to_bits() + 1) - m);
+    let step = EDGE_ULPS * ulp(magnitude);
     let twice_area = (b - a).cross(c - a).length();
     // Barycentric of a vertex = distance to the opposite edge / that height.
     let min_bary = |p: Vec3, q: Vec3| {
