@@ -36,6 +36,9 @@ import time
 import bpy
 from mathutils import Matrix, Vector
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from mesh_io import Unrepresentable, read_obj, rectangle_of  # noqa: E402
+
 
 def refuse(msg):
     print(f"cycles_ref: cannot represent exactly: {msg}", file=sys.stderr)
@@ -55,25 +58,6 @@ def parse_args(argv):
     ap.add_argument("--threads", type=int, default=0, help="0: all cores")
     ap.add_argument("--out", required=True, help="prefix: <out>_r<k>.exr, <out>_spp<N>.exr, <out>_cycles.json")
     return ap.parse_args(argv)
-
-
-def read_obj(path):
-    verts, normals, faces = [], [], []
-    with open(path) as f:
-        for line in f:
-            if line.startswith("v "):
-                verts.append(tuple(float(x) for x in line.split()[1:4]))
-            elif line.startswith("vn "):
-                normals.append(tuple(float(x) for x in line.split()[1:4]))
-            elif line.startswith("f "):
-                idx = [w.split("/") for w in line.split()[1:]]
-                # Our exporter writes the normal index equal to the position index.
-                if any(len(i) != 3 or i[0] != i[2] for i in idx):
-                    refuse(f"{path}: face '{line.strip()}' is not 'f v//v ...' as `pathtracer export` writes")
-                faces.append(tuple(int(i[0]) - 1 for i in idx))
-    if len(normals) != len(verts):
-        refuse(f"{path}: {len(normals)} normals for {len(verts)} vertices")
-    return verts, normals, faces
 
 
 def node_tree(mat):
@@ -175,39 +159,6 @@ def add_sphere(name, centre, radius, mat):
     return ob
 
 
-def rectangle_of(verts, faces):
-    """(corner, edge u, edge v, winding normal) when the mesh is one planar rectangle of two
-    triangles, else None."""
-    if len(faces) != 2 or len(verts) not in (4, 6):
-        return None
-    pts = [Vector(v) for v in verts]
-    uniq = []
-    for p in pts:
-        if all((p - q).length > 1e-7 * (1 + p.length) for q in uniq):
-            uniq.append(p)
-    if len(uniq) != 4:
-        return None
-    a, b, c = (pts[i] for i in faces[0])
-    n = (b - a).cross(c - a)
-    if n.length == 0:
-        return None
-    n.normalize()
-    # Order the corners around the centre in the plane.
-    centre = sum(uniq, Vector()) / 4
-    ax = (uniq[0] - centre).normalized()
-    ay = n.cross(ax)
-    ring = sorted(uniq, key=lambda p: math.atan2((p - centre).dot(ay), (p - centre).dot(ax)))
-    u, v = ring[1] - ring[0], ring[3] - ring[0]
-    scale = max(u.length, v.length)
-    if abs(u.dot(v)) > 1e-5 * scale * scale or (ring[2] - ring[1] - v).length > 1e-5 * scale or abs((ring[2] - ring[0]).dot(n)) > 1e-5 * scale:
-        return None
-    # Both triangles must face the same way.
-    a2, b2, c2 = (pts[i] for i in faces[1])
-    if (b2 - a2).cross(c2 - a2).dot(n) <= 0:
-        return None
-    return ring[0], u, v, n
-
-
 def add_area_lamp(name, corner, u, v, n, radiance, cam_visible):
     L = max(radiance)
     if L <= 0:
@@ -270,7 +221,7 @@ def build(spec, folder, mode):
             if s["type"] != "mesh" or (rect := rectangle_of(verts, faces)) is None:
                 refuse(f"shape {s['id']} ({s['name']}): an emissive {s['type']} that is not one rectangle "
                        "(Cycles 3.4 is biased near emissive meshes; only rectangles go through the exact AREA lamp)")
-            corner, u, v, n = rect
+            corner, u, v, n = (Vector(x) for x in rect)
             add_area_lamp(name + "_lamp", corner, u, v, n, s["emission"], cam_visible=False)
             # The stand-in sits behind the lamp by 1e-4 of its size: the lamp lights the
             # scene, the stand-in shows the emission to the camera and occludes.
@@ -448,4 +399,7 @@ def main():
         json.dump(meta, f)
 
 
-main()
+try:
+    main()
+except Unrepresentable as e:
+    refuse(str(e))

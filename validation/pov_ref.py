@@ -28,6 +28,8 @@ import os
 import subprocess
 import sys
 
+from mesh_io import Unrepresentable, cross, dot, norm, read_obj, rectangle_of, sub
+
 
 def refuse(msg):
     print(f"pov_ref: cannot represent exactly: {msg}", file=sys.stderr)
@@ -36,17 +38,6 @@ def refuse(msg):
 
 def vec(v):
     return "<{:.9g},{:.9g},{:.9g}>".format(*v)
-
-
-def read_obj(path):
-    verts, faces = [], []
-    with open(path) as f:
-        for line in f:
-            if line.startswith("v "):
-                verts.append(tuple(float(x) for x in line.split()[1:4]))
-            elif line.startswith("f "):
-                faces.append(tuple(int(w.split("/")[0]) - 1 for w in line.split()[1:]))
-    return verts, faces
 
 
 def pov_scene(spec, folder, mode, shift=(0.0, 0.0), supersample=1, lightlets=None, rng=None):
@@ -73,7 +64,7 @@ def pov_scene(spec, folder, mode, shift=(0.0, 0.0), supersample=1, lightlets=Non
     far = 0.0
     for s in spec["shapes"]:
         if s["type"] == "mesh":
-            verts, faces = read_obj(os.path.join(folder, s["file"]))
+            verts, _, faces = read_obj(os.path.join(folder, s["file"]))
             if not faces:
                 refuse(f"shape {s['id']}: empty mesh")
             far = max(far, max(math.dist(o, v) for v in verts))
@@ -94,7 +85,7 @@ def pov_scene(spec, folder, mode, shift=(0.0, 0.0), supersample=1, lightlets=Non
             tex = (f"texture {{ pigment {{ function {{ {f} }} color_map {{ [0 rgb 0] [1 rgb {dmax:.9g}] }} }} "
                    "finish { emission 1 diffuse 0 ambient 0 } }")
         if s["type"] == "mesh":
-            verts, faces = read_obj(os.path.join(folder, s["file"]))
+            verts, _, faces = read_obj(os.path.join(folder, s["file"]))
             body = [f"mesh2 {{ vertex_vectors {{ {len(verts)}"]
             body += ["," + vec(v) for v in verts]
             body += [f"}} face_indices {{ {len(faces)}"]
@@ -128,7 +119,7 @@ def radiance_lights(spec, folder, n, rng):
             continue
         if s["type"] != "mesh":
             refuse(f"shape {s['id']}: an emissive {s['type']} (only rectangles become POV-Ray lights)")
-        verts, faces = read_obj(os.path.join(folder, s["file"]))
+        verts, _, faces = read_obj(os.path.join(folder, s["file"]))
         rect = rectangle_of(verts, faces)
         if rect is None:
             refuse(f"shape {s['id']} ({s['name']}): an emissive mesh that is not one rectangle")
@@ -158,53 +149,6 @@ def radiance_lights(spec, folder, n, rng):
         out.append(f"polygon {{ 5, {', '.join(vec(q) for q in corners + [c])} texture {{ pigment {{ rgb {vec(s['emission'])} }} "
                    "finish { emission 1 diffuse 0 ambient 0 } } no_shadow }")
     return out
-
-
-def sub(a, b):
-    return [x - y for x, y in zip(a, b)]
-
-
-def dot(a, b):
-    return sum(x * y for x, y in zip(a, b))
-
-
-def cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
-def norm(a):
-    return math.sqrt(dot(a, a))
-
-
-def rectangle_of(verts, faces):
-    """(corner, u, v, unit winding normal) of a mesh that is one rectangle of two triangles
-    facing the same way, else None."""
-    if len(faces) != 2:
-        return None
-    uniq = []
-    for p in verts:
-        if all(norm(sub(p, q)) > 1e-7 * (1 + norm(p)) for q in uniq):
-            uniq.append(p)
-    if len(uniq) != 4:
-        return None
-    a, b, c = (verts[i] for i in faces[0])
-    n = cross(sub(b, a), sub(c, a))
-    if norm(n) == 0:
-        return None
-    n = [x / norm(n) for x in n]
-    a2, b2, c2 = (verts[i] for i in faces[1])
-    if dot(cross(sub(b2, a2), sub(c2, a2)), n) <= 0:
-        return None
-    centre = [sum(p[i] for p in uniq) / 4 for i in range(3)]
-    ax = sub(uniq[0], centre)
-    ax = [x / norm(ax) for x in ax]
-    ay = cross(n, ax)
-    ring = sorted(uniq, key=lambda p: math.atan2(dot(sub(p, centre), ay), dot(sub(p, centre), ax)))
-    u, v = sub(ring[1], ring[0]), sub(ring[3], ring[0])
-    scale = max(norm(u), norm(v))
-    if abs(dot(u, v)) > 1e-5 * scale * scale or norm(sub(sub(ring[2], ring[1]), v)) > 1e-5 * scale:
-        return None
-    return ring[0], u, v, n
 
 
 def main():
@@ -251,4 +195,7 @@ def render(text, out, w, h, threads):
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except Unrepresentable as e:
+        refuse(str(e))

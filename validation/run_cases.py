@@ -208,6 +208,14 @@ def write_zmap(path, z):
     write_png(path, np.stack([1 - np.clip(-t, 0, 1), 1 - np.abs(t), 1 - np.clip(t, 0, 1)], -1))
 
 
+def from_renders(imgs, meta):
+    """A reference from its independent renders: their mean, the per-pixel variance of that
+    mean, each render's image mean (for the global test), the renders and their total time."""
+    stack = np.stack(imgs)
+    return {"mean": stack.mean(axis=0), "var": stack.var(axis=0, ddof=1) / len(imgs), "image_means": [float(i.mean()) for i in imgs],
+            "renders": imgs, "seconds": sum(p["seconds"] for p in meta["renders"])}
+
+
 def rel_mse(x, r):
     return float(np.mean((x - r) ** 2 / (r * r + 1e-2)))
 
@@ -288,12 +296,9 @@ class Harness:
                 sys.exit(f"run_cases: blender/cycles_ref.py failed (rc {r.returncode}):\n{r.stdout[-2000:]}{r.stderr[-2000:]}")
         with open(ref + "_cycles.json") as f:
             meta = json.load(f)
-        imgs = [read_exr(p["file"]) for p in meta["renders"]]
-        stack = np.stack(imgs)
-        mean = stack.mean(axis=0)
-        curve = [{"spp": p["spp"], "seconds": p["seconds"], "rel_mse": rel_mse(read_exr(p["file"]), mean)} for p in meta["ladder"]]
-        return {"renderer": meta["renderer"], "mean": mean, "var": stack.var(axis=0, ddof=1) / len(imgs), "image_means": [float(i.mean()) for i in imgs],
-                "spp": spp * len(imgs), "seconds": sum(p["seconds"] for p in meta["renders"]), "curve": curve, "renders": imgs}
+        out = from_renders([read_exr(p["file"]) for p in meta["renders"]], meta)
+        curve = [{"spp": p["spp"], "seconds": p["seconds"], "rel_mse": rel_mse(read_exr(p["file"]), out["mean"])} for p in meta["ladder"]]
+        return {**out, "renderer": meta["renderer"], "spp": spp * len(out["renders"]), "curve": curve}
 
     def povray(self, scene_dir, key, m):
         """Direct lighting only (POV-Ray has no unbiased global illumination)."""
@@ -315,10 +320,7 @@ class Harness:
         for p in meta["renders"]:
             a = read_exr(p["file"])
             imgs.append(a.reshape(a.shape[0] // S, S, a.shape[1] // S, S, 3).mean(axis=(1, 3)))
-        stack = np.stack(imgs)
-        return {"renderer": f"{meta['renderer']}, {n}x{n} lightlets, {S}x{S} rays/px", "mean": stack.mean(0), "var": stack.var(0, ddof=1) / len(imgs),
-                "image_means": [float(i.mean()) for i in imgs], "spp": S * S * len(imgs), "seconds": sum(p["seconds"] for p in meta["renders"]), "curve": [],
-                "renders": imgs}
+        return {**from_renders(imgs, meta), "renderer": f"{meta['renderer']}, {n}x{n} lightlets, {S}x{S} rays/px", "spp": S * S * len(imgs), "curve": []}
 
     # ---- ours ----
 
@@ -658,10 +660,10 @@ def geometry_vs_cycles(cid, name, backend, ours, cyc, folder, cam):
 
 def interp_loglog(points, y):
     """x at which the piecewise log-log line through (y_i, x_i), sorted by y, reaches y; None
-    outside the range."""
+    outside the range (segments with a value <= 0 are skipped)."""
     pts = sorted(points)
     for (y0, x0), (y1, x1) in zip(pts, pts[1:]):
-        if y0 <= y <= y1 and y1 > y0 > 0:
+        if y0 <= y <= y1 and y1 > y0 > 0 and x0 > 0 and x1 > 0:
             a = (np.log(y) - np.log(y0)) / (np.log(y1) - np.log(y0))
             return float(np.exp(np.log(x0) + a * (np.log(x1) - np.log(x0))))
     return None
@@ -684,12 +686,7 @@ def equal_time_ratio(ours, theirs):
     """relMSE(ours) / relMSE(theirs) at equal render time: both curves interpolated
     log-log at the geometric mean of the overlapping time range. None without overlap."""
     def at(curve, t):
-        pts = sorted((p["seconds"], p["rel_mse"]) for p in curve)
-        for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
-            if t0 <= t <= t1 and t1 > t0 and e0 > 0 and e1 > 0:
-                a = (np.log(t) - np.log(t0)) / (np.log(t1) - np.log(t0))
-                return float(np.exp(np.log(e0) + a * (np.log(e1) - np.log(e0))))
-        return None
+        return interp_loglog([(p["seconds"], p["rel_mse"]) for p in curve], t)
     if not ours or not theirs:
         return None
     lo = max(min(p["seconds"] for p in ours), min(p["seconds"] for p in theirs))
