@@ -14,7 +14,18 @@ use rayon::prelude::*;
 const MAX_LEAF: usize = 8;
 const BINS: usize = 16;
 /// Cost of one node visit relative to one primitive test, for the SAH.
-const TRAVERSAL_COST: f32 = 1.0;
+const TRAVERSAL_COST: f32 = 0.5;
+/// Leaves are tested `BLOCK` triangles at a time (`wide::LANES`), so the SAH
+/// counts a side's primitives in whole blocks, as Embree's builder does: a
+/// leaf of 3 triangles costs as much to test as one of 4. Counting single
+/// primitives left the 1M-triangle mesh's groups half empty (2.03 triangles
+/// per group of 4), doubling leaf memory and wasting lanes.
+const BLOCK: usize = 4;
+
+#[inline]
+fn blocks(n: usize) -> f32 {
+    n.div_ceil(BLOCK) as f32
+}
 /// Subtrees with more primitives than this are built in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
 /// Nodes with more primitives than this are also binned in parallel (the top
@@ -193,7 +204,7 @@ fn find_split(refs: &[PrimRef], bounds: &Aabb, cbounds: &Aabb) -> Option<(usize,
         for i in (1..BINS).rev() {
             acc = acc.union(&boxes[i]);
             cnt += counts[i];
-            right_cost[i] = if cnt > 0 { acc.half_area() * cnt as f32 } else { 0.0 };
+            right_cost[i] = if cnt > 0 { acc.half_area() * blocks(cnt) } else { 0.0 };
         }
         let mut acc = Aabb::EMPTY;
         let mut cnt = 0;
@@ -203,14 +214,14 @@ fn find_split(refs: &[PrimRef], bounds: &Aabb, cbounds: &Aabb) -> Option<(usize,
             if cnt == 0 || cnt == n {
                 continue;
             }
-            let cost = TRAVERSAL_COST + (acc.half_area() * cnt as f32 + right_cost[i + 1]) / parent_area;
+            let cost = TRAVERSAL_COST + (acc.half_area() * blocks(cnt) + right_cost[i + 1]) / parent_area;
             if best.map_or(true, |b| cost < b.2) {
                 best = Some((axis, i, cost));
             }
         }
     }
     match best {
-        Some((_, _, cost)) if n <= MAX_LEAF && cost >= n as f32 => None,
+        Some((_, _, cost)) if n <= MAX_LEAF && cost >= blocks(n) => None,
         other => other,
     }
 }

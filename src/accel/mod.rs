@@ -6,7 +6,7 @@
 
 pub mod brute;
 pub mod bvh;
-pub mod bvh4;
+pub mod wide;
 pub mod embree;
 pub mod prims;
 
@@ -140,7 +140,7 @@ pub struct Built {
 pub fn build(kind: BackendKind, shapes: &[Shape], threads: usize) -> Result<Built> {
     let start = Instant::now();
     let accel: Box<dyn Traversal> = match kind {
-        BackendKind::Native => Box::new(bvh4::Bvh4::build(shapes)),
+        BackendKind::Native => Box::new(wide::WideBvh::<{ wide::NATIVE_WIDTH }>::build(shapes)),
         BackendKind::Brute => Box::new(brute::BruteForce::new(shapes)),
         BackendKind::Embree => Box::new(embree::EmbreeBackend::build(shapes, threads)?),
     };

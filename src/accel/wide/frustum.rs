@@ -1,0 +1,213 @@
+//! Coherent closest-hit rays (camera rays) traced 16 at a time through the
+//! 8-wide tree: interior nodes are tested once per packet against the
+//! packet's *interval* ray (the box of its origins and of its reciprocal
+//! directions), and only nodes with leaf children test the rays one by one
+//! before their leaves are intersected ray by ray.
+//!
+//! Answers equal single-ray traversal bit for bit: the interval test is
+//! conservative (it enters every box any ray of the packet enters, see
+//! `Frustum::test`), the per-ray test at leaf parents is the single-ray test
+//! itself, and the tie rule makes the closest hit independent of the order
+//! leaves are visited in.
+//!
+//! Packets whose rays cannot share an interval ray (a zero or mixed-sign
+//! direction component, an invalid ray) are traced one ray at a time.
+
+use super::{Shear, Slab, WideBvh, EMPTY, LEAF_BIT, STACK};
+use crate::accel::bvh::ROBUST_SCALE;
+use crate::accel::prims::closer;
+use crate::accel::Hit;
+use crate::geometry::RayTransform;
+use crate::ray::Ray;
+use std::mem::MaybeUninit;
+
+/// Rays per packet.
+pub(super) const PACKET: usize = 16;
+
+/// The interval ray of a packet: per axis, the range of origins and of
+/// reciprocal directions (all of one sign), and which plane is near.
+pub(super) struct Frustum {
+    o_lo: [f32; 3],
+    o_hi: [f32; 3],
+    inv_lo: [f32; 3],
+    inv_hi: [f32; 3],
+    near_plane: [usize; 3],
+    tmin: f32,
+}
+
+impl Frustum {
+    /// `None` when the rays do not all go the same way on every axis.
+    pub(super) fn new(rays: &[Ray]) -> Option<Frustum> {
+        let first = rays.first()?;
+        let neg = first.dir.to_array().map(|d| d.is_sign_negative());
+        let mut f = Frustum {
+            o_lo: [f32::INFINITY; 3],
+            o_hi: [f32::NEG_INFINITY; 3],
+            inv_lo: [f32::INFINITY; 3],
+            inv_hi: [f32::NEG_INFINITY; 3],
+            near_plane: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
+            tmin: f32::INFINITY,
+        };
+        for r in rays {
+            if !r.is_valid() {
+                return None;
+            }
+            for a in 0..3 {
+                let inv = 1.0 / r.dir[a];
+                // Zero components (infinite reciprocals) would make the
+                // interval products NaN; mixed signs change the near plane.
+                if r.dir[a] == 0.0 || !inv.is_finite() || r.dir[a].is_sign_negative() != neg[a] {
+                    return None;
+                }
+                f.o_lo[a] = f.o_lo[a].min(r.origin[a]);
+                f.o_hi[a] = f.o_hi[a].max(r.origin[a]);
+                f.inv_lo[a] = f.inv_lo[a].min(inv);
+                f.inv_hi[a] = f.inv_hi[a].max(inv);
+            }
+            f.tmin = f.tmin.min(r.tmin);
+        }
+        Some(f)
+    }
+
+    /// Bit i set when some ray of the packet may enter child i in
+    /// [tmin, tmax]; `near` gets a lower bound of the rays' entry distances.
+    ///
+    /// A ray's slab distance is `fl(fl(plane - o) * inv)`. With `o` in
+    /// [o_lo, o_hi], `fl(plane - o)` lies in [fl(plane - o_hi),
+    /// fl(plane - o_lo)] because rounding is monotonic; the product of two
+    /// intervals is bounded by its four corner products, again rounded
+    /// monotonically. So the smallest corner bounds every ray's near
+    /// distance from below and the largest (times `ROBUST_SCALE`) every far
+    /// distance from above: a ray that passes its own test passes this one.
+    /// Inputs are finite and non-zero, so no product is NaN.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2; `W` must be 8.
+    #[inline(always)]
+    unsafe fn test<const W: usize>(&self, n: &super::Node<W>, tmax: f32, near: &mut [f32; W]) -> u32 {
+        use std::arch::x86_64::*;
+        debug_assert_eq!(W, 8);
+        let rows = n.bounds.as_ptr() as *const f32;
+        let mut t0 = _mm256_set1_ps(self.tmin);
+        let mut t1 = _mm256_set1_ps(tmax);
+        for a in 0..3 {
+            let (o_lo, o_hi) = (_mm256_set1_ps(self.o_lo[a]), _mm256_set1_ps(self.o_hi[a]));
+            let (i_lo, i_hi) = (_mm256_set1_ps(self.inv_lo[a]), _mm256_set1_ps(self.inv_hi[a]));
+            let np = _mm256_load_ps(rows.add(self.near_plane[a] * W));
+            let fp = _mm256_load_ps(rows.add((self.near_plane[a] + 3) % 6 * W));
+            let (d0, d1) = (_mm256_sub_ps(np, o_hi), _mm256_sub_ps(np, o_lo));
+            let tn = _mm256_min_ps(
+                _mm256_min_ps(_mm256_mul_ps(d0, i_lo), _mm256_mul_ps(d0, i_hi)),
+                _mm256_min_ps(_mm256_mul_ps(d1, i_lo), _mm256_mul_ps(d1, i_hi)),
+            );
+            let (d0, d1) = (_mm256_sub_ps(fp, o_hi), _mm256_sub_ps(fp, o_lo));
+            let tf = _mm256_max_ps(
+                _mm256_max_ps(_mm256_mul_ps(d0, i_lo), _mm256_mul_ps(d0, i_hi)),
+                _mm256_max_ps(_mm256_mul_ps(d1, i_lo), _mm256_mul_ps(d1, i_hi)),
+            );
+            t0 = _mm256_max_ps(tn, t0);
+            t1 = _mm256_min_ps(_mm256_mul_ps(tf, _mm256_set1_ps(ROBUST_SCALE)), t1);
+        }
+        _mm256_storeu_ps(near.as_mut_ptr(), t0);
+        _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32
+    }
+}
+
+impl<const W: usize> WideBvh<W> {
+    /// `hits[i]` = the closest hit of `rays[i]`, packets of `PACKET` rays.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 (`self.avx`); `W` must be 8.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest_coherent_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            match Frustum::new(r) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet(&f, r, h),
+                _ => self.closest_all::<true>(r, h),
+            }
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn frustum_packet(&self, f: &Frustum, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        let n = rays.len();
+        let mut slabs: [MaybeUninit<Slab>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
+        let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
+        let mut shears: [MaybeUninit<Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
+        let mut tmax = [0.0f32; PACKET];
+        for (i, r) in rays.iter().enumerate() {
+            slabs[i].write(Slab::new(r));
+            let rt = RayTransform::new(r.origin, r.dir);
+            shears[i].write(Shear::new(&rt));
+            rts[i].write(rt);
+            tmax[i] = r.tmax;
+            hits[i] = None;
+        }
+        let slab = |i: usize| slabs[i].assume_init_ref();
+        let mut far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
+        let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
+        let mut sp = 0;
+        let mut cur = self.root;
+        loop {
+            // `cur` is always an interior node: leaves are intersected from
+            // their parent, ray by ray.
+            let node = &self.nodes[cur as usize];
+            let mut near = [0.0f32; W];
+            let mask = f.test::<W>(node, far, &mut near);
+            let mut leaves = 0u32;
+            for lane in 0..W {
+                if node.child[lane] & LEAF_BIT != 0 && node.child[lane] != EMPTY {
+                    leaves |= 1 << lane;
+                }
+            }
+            if mask & leaves != 0 {
+                for i in 0..n {
+                    let mut ray_near = [0.0f32; W];
+                    let mut todo = slab(i).test::<W, true>(node, rays[i].tmin, tmax[i], &mut ray_near) & mask & leaves;
+                    while todo != 0 {
+                        let lane = todo.trailing_zeros() as usize;
+                        todo &= todo - 1;
+                        let leaf = self.leaf_of(node.child[lane]);
+                        let (best, t) = (&mut hits[i], &mut tmax[i]);
+                        self.leaf(&leaf, &rays[i], rts[i].assume_init_ref(), shears[i].assume_init_ref(), *t, &mut |h| {
+                            if closer(h, best) {
+                                *t = h.t;
+                                *best = Some(h);
+                            }
+                            false
+                        });
+                    }
+                }
+                far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
+            }
+            let inner = mask & !leaves;
+            if inner != 0 {
+                let base = sp;
+                let mut m = inner;
+                while m != 0 {
+                    let lane = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let code = node.child[lane];
+                    self.prefetch(code);
+                    stack[sp].write((code, near[lane]));
+                    sp += 1;
+                }
+                let pushed = std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32), sp - base);
+                super::sort_far_first(pushed, |e| e.1);
+            }
+            // Pop the nearest child that may still hold a closer hit (the
+            // leaves just tested may have shortened the rays).
+            loop {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                let (code, dist) = stack[sp].assume_init();
+                if dist <= far {
+                    cur = code;
+                    break;
+                }
+            }
+        }
+    }
+}
