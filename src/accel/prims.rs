@@ -4,6 +4,7 @@ use super::Hit;
 use crate::geometry::{intersect_sphere, intersect_triangle, Aabb, RayTransform};
 use crate::scene::Shape;
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// Sphere primitives are flagged in the top bit of `Prim::geom_id`.
 const SPHERE_FLAG: u32 = 1 << 31;
@@ -62,15 +63,14 @@ impl Prim {
 
 /// Every primitive of every shape, in shape order.
 pub fn collect(shapes: &[Shape]) -> Vec<Prim> {
-    let mut out = Vec::new();
+    let total = shapes.iter().map(|s| if let Shape::Mesh(m) = s { m.triangles.len() } else { 1 }).sum();
+    let mut out = super::huge::vec_with_capacity(total);
     for (g, shape) in shapes.iter().enumerate() {
         let g = g as u32;
         match shape {
             Shape::Mesh(m) => {
-                for (i, t) in m.triangles.iter().enumerate() {
-                    let v = [m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]];
-                    out.push(Prim { v, geom_id: g, prim_id: i as u32 });
-                }
+                let tri = |(i, t): (usize, &[u32; 3])| Prim { v: [m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]], geom_id: g, prim_id: i as u32 };
+                out.par_extend(m.triangles.par_iter().enumerate().map(tri));
             }
             Shape::Sphere { center, radius } => {
                 out.push(Prim { v: [*center, Vec3::new(*radius, 0.0, 0.0), Vec3::ZERO], geom_id: g | SPHERE_FLAG, prim_id: 0 });

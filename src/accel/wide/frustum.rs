@@ -1,4 +1,4 @@
-//! Coherent closest-hit rays (camera rays) traced 16 at a time through the
+//! Coherent rays (camera rays, shadow rays towards one light) traced 16 at a time through the
 //! 8-wide tree: interior nodes are tested once per packet against the
 //! packet's *interval* ray (the box of its origins and of its reciprocal
 //! directions), and only nodes with leaf children test the rays one by one
@@ -23,6 +23,11 @@ use std::mem::MaybeUninit;
 
 /// Rays per packet.
 pub(super) const PACKET: usize = 16;
+/// Packets whose unit directions differ by more than this in some
+/// component are traced ray by ray: the interval ray of a fanned-out packet
+/// (shadow rays near their light) enters many boxes none of its rays
+/// enters.
+const MAX_SPREAD: f32 = 0.1;
 
 /// The interval ray of a packet: per axis, the range of origins and of
 /// reciprocal directions (all of one sign), and which plane is near.
@@ -36,8 +41,12 @@ pub(super) struct Frustum {
 }
 
 impl Frustum {
-    /// `None` when the rays do not all go the same way on every axis.
-    pub(super) fn new(rays: &[Ray]) -> Option<Frustum> {
+    /// `None` when the rays do not all go the same way on every axis or,
+    /// with `limit_spread` (shadow rays), when they fan out by more than
+    /// `MAX_SPREAD`. Camera rays skip that check: normalising every
+    /// direction cost 13 % of their throughput on the cow, and pinhole
+    /// packets of adjacent pixels never fan out.
+    pub(super) fn new(rays: &[Ray], limit_spread: bool) -> Option<Frustum> {
         let first = rays.first()?;
         let neg = first.dir.to_array().map(|d| d.is_sign_negative());
         let mut f = Frustum {
@@ -48,9 +57,17 @@ impl Frustum {
             near_plane: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
             tmin: f32::INFINITY,
         };
+        let (mut d_lo, mut d_hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for r in rays {
             if !r.is_valid() {
                 return None;
+            }
+            if limit_spread {
+                let d = r.dir.normalize();
+                for a in 0..3 {
+                    d_lo[a] = d_lo[a].min(d[a]);
+                    d_hi[a] = d_hi[a].max(d[a]);
+                }
             }
             for a in 0..3 {
                 let inv = 1.0 / r.dir[a];
@@ -65,6 +82,10 @@ impl Frustum {
                 f.inv_hi[a] = f.inv_hi[a].max(inv);
             }
             f.tmin = f.tmin.min(r.tmin);
+        }
+        let spread = (0..3).map(|a| d_hi[a] - d_lo[a]).fold(0.0f32, f32::max);
+        if limit_spread && spread > MAX_SPREAD {
+            return None;
         }
         Some(f)
     }
@@ -120,16 +141,34 @@ impl<const W: usize> WideBvh<W> {
     /// The CPU must have AVX2 (`self.avx`); `W` must be 8.
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_coherent_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        let mut unused = [false; PACKET];
         for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            match Frustum::new(r) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet(&f, r, h),
+            match Frustum::new(r, false) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false>(&f, r, h, &mut unused),
                 _ => self.closest_all::<true>(r, h),
             }
         }
     }
 
+    /// `out[i]` = whether `rays[i]` is occluded, packets of `PACKET` rays.
+    ///
+    /// # Safety
+    /// As `closest_coherent_avx`.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn any_coherent_avx(&self, rays: &[Ray], out: &mut [bool]) {
+        let mut unused = [None; PACKET];
+        for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            match Frustum::new(r, true) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true>(&f, r, &mut unused, o),
+                _ => self.any_all::<true>(r, o),
+            }
+        }
+    }
+
+    /// Closest hits into `hits` or, with `ANY`, occlusion into `occluded`
+    /// (rays leave the packet once occluded).
     #[inline(always)]
-    unsafe fn frustum_packet(&self, f: &Frustum, rays: &[Ray], hits: &mut [Option<Hit>]) {
+    unsafe fn frustum_packet<const ANY: bool>(&self, f: &Frustum, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
         let n = rays.len();
         let mut slabs: [MaybeUninit<Slab>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
@@ -141,8 +180,13 @@ impl<const W: usize> WideBvh<W> {
             shears[i].write(Shear::new(&rt));
             rts[i].write(rt);
             tmax[i] = r.tmax;
-            hits[i] = None;
+            if ANY {
+                occluded[i] = false;
+            } else {
+                hits[i] = None;
+            }
         }
+        let mut active: u64 = (1u64 << n) - 1;
         let slab = |i: usize| slabs[i].assume_init_ref();
         let mut far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
         let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
@@ -161,7 +205,10 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             if mask & leaves != 0 {
-                for i in 0..n {
+                let mut rays_left = active;
+                while rays_left != 0 {
+                    let i = rays_left.trailing_zeros() as usize;
+                    rays_left &= rays_left - 1;
                     let mut ray_near = [0.0f32; W];
                     let mut todo = slab(i).test::<W, true>(node, rays[i].tmin, tmax[i], &mut ray_near) & mask & leaves;
                     while todo != 0 {
@@ -169,16 +216,31 @@ impl<const W: usize> WideBvh<W> {
                         todo &= todo - 1;
                         let leaf = self.leaf_of(node.child[lane]);
                         let (best, t) = (&mut hits[i], &mut tmax[i]);
-                        self.leaf(&leaf, &rays[i], rts[i].assume_init_ref(), shears[i].assume_init_ref(), *t, &mut |h| {
+                        let found = self.leaf(&leaf, &rays[i], rts[i].assume_init_ref(), shears[i].assume_init_ref(), *t, &mut |h| {
+                            if ANY {
+                                return true;
+                            }
                             if closer(h, best) {
                                 *t = h.t;
                                 *best = Some(h);
                             }
                             false
                         });
+                        if ANY && found {
+                            occluded[i] = true;
+                            active &= !(1u64 << i);
+                            break;
+                        }
                     }
                 }
-                far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
+                if active == 0 {
+                    return;
+                }
+                far = if ANY {
+                    (0..n).filter(|&i| active & (1u64 << i) != 0).map(|i| tmax[i]).fold(f32::NEG_INFINITY, f32::max)
+                } else {
+                    tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t))
+                };
             }
             let inner = mask & !leaves;
             if inner != 0 {
@@ -192,8 +254,10 @@ impl<const W: usize> WideBvh<W> {
                     stack[sp].write((code, near[lane]));
                     sp += 1;
                 }
-                let pushed = std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32), sp - base);
-                super::sort_far_first(pushed, |e| e.1);
+                if !ANY {
+                    let pushed = std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32), sp - base);
+                    super::sort_far_first(pushed, |e| e.1);
+                }
             }
             // Pop the nearest child that may still hold a closer hit (the
             // leaves just tested may have shortened the rays).

@@ -19,6 +19,7 @@ use crate::geometry::{intersect_triangle, Aabb, RayTransform};
 use crate::ray::Ray;
 use crate::scene::Shape;
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// Triangles per group, and rays per packet: one SSE register.
 const LANES: usize = 4;
@@ -79,11 +80,9 @@ pub struct WideBvh<const W: usize> {
     spheres: Vec<Prim>,
     /// The root: a node, or a leaf when the scene is tiny.
     root: u32,
-    /// SAH cost of the built tree, as Embree's BVH statistics (`verbose=2`)
-    /// count it: expected node visits and expected 4-triangle group (or
-    /// sphere) tests for a ray through the root's box, traversal and
-    /// intersection costs both 1.
-    sah: SahCost,
+    /// Half area of the root's box, for the SAH cost (computed on demand,
+    /// see `sah`: it is a report, not part of the build).
+    root_area: f64,
     /// Box tests with AVX2 (8 boxes per instruction): `W` = 8 on a CPU that
     /// has it, unless `PATHTRACER_NATIVE_ISA=sse` asks for the SSE2 path.
     avx: bool,
@@ -113,62 +112,168 @@ impl<const W: usize> Default for Arrays<W> {
     }
 }
 
-impl<const W: usize> Arrays<W> {
-    /// Flatten `node` depth-first; returns its child code.
-    fn emit(&mut self, node: &BuildNode, prims: &[Prim]) -> u32 {
-        match node {
-            BuildNode::Leaf { first, count, .. } => self.emit_leaf(&prims[*first..*first + *count]),
-            BuildNode::Interior { .. } => {
-                // Open the largest child until W children (or only leaves) remain.
-                let mut kids: Vec<&BuildNode> = vec![node];
-                while kids.len() < W {
-                    let best = kids
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, k)| matches!(k, BuildNode::Interior { .. }))
-                        .max_by(|a, b| a.1.bounds().half_area().total_cmp(&b.1.bounds().half_area()))
-                        .map(|(i, _)| i);
-                    let Some(i) = best else { break };
-                    let BuildNode::Interior { children, .. } = kids.remove(i) else { unreachable!() };
-                    kids.insert(i, &children.1);
-                    kids.insert(i, &children.0);
+/// Subtrees with more primitives than this are laid out in parallel.
+const PARALLEL_EMIT: usize = 1 << 15;
+
+/// The children of `node`'s wide node: open the largest interior child until
+/// `W` children (or only leaves) remain, keeping them in tree order.
+fn collapse<const W: usize>(node: &BuildNode) -> ([&BuildNode; W], usize) {
+    let mut kids: [&BuildNode; W] = [node; W];
+    let mut n = 1;
+    while n < W {
+        let mut best: Option<(usize, f32)> = None;
+        for (i, k) in kids[..n].iter().enumerate() {
+            if let BuildNode::Interior { bounds, .. } = k {
+                let a = bounds.half_area();
+                if best.map_or(true, |(_, b)| a > b) {
+                    best = Some((i, a));
                 }
-                let idx = self.nodes.len();
-                self.nodes.push(Node { bounds: [[f32::INFINITY; W], [f32::INFINITY; W], [f32::INFINITY; W], [f32::NEG_INFINITY; W], [f32::NEG_INFINITY; W], [f32::NEG_INFINITY; W]], child: [EMPTY; W] });
-                for (lane, k) in kids.iter().enumerate() {
-                    let code = self.emit(k, prims);
-                    let b: &Aabb = k.bounds();
-                    let n = &mut self.nodes[idx];
-                    for a in 0..3 {
-                        n.bounds[a][lane] = b.min[a];
-                        n.bounds[3 + a][lane] = b.max[a];
-                    }
-                    n.child[lane] = code;
+            }
+        }
+        let Some((i, _)) = best else { break };
+        let BuildNode::Interior { children, .. } = kids[i] else { unreachable!() };
+        kids.copy_within(i + 1..n, i + 2);
+        kids[i] = &children.0;
+        kids[i + 1] = &children.1;
+        n += 1;
+    }
+    (kids, n)
+}
+
+impl<const W: usize> Arrays<W> {
+    /// Empty arrays with room for a subtree of `prims` triangles: the
+    /// block-counted SAH fills groups of 4 to about 3.8 triangles, and an
+    /// 8-wide node has about 6 leaves below it on average.
+    fn with_room_for(prims: usize) -> Self {
+        let groups = prims / 3 + 8;
+        Arrays {
+            nodes: super::huge::vec_with_capacity(prims / (2 * W) + 8),
+            leaves: Vec::new(),
+            groups: super::huge::vec_with_capacity(groups),
+            ids: super::huge::vec_with_capacity(groups * LANES),
+            spheres: Vec::new(),
+        }
+    }
+
+    /// Flatten `node` depth-first; returns its child code. Leaves index
+    /// `prims` through `order`.
+    fn emit(&mut self, node: &BuildNode, prims: &[Prim], order: &[u32]) -> u32 {
+        match node {
+            BuildNode::Leaf { first, count, .. } => self.emit_leaf(prims, &order[*first..*first + *count]),
+            BuildNode::Interior { .. } => {
+                let (kids, n_kids) = collapse::<W>(node);
+                let idx = self.push_node();
+                for (lane, k) in kids[..n_kids].iter().enumerate() {
+                    let code = self.emit(k, prims, order);
+                    self.set_child(idx, lane, k.bounds(), code);
                 }
                 idx as u32
             }
         }
     }
 
-    fn emit_leaf(&mut self, prims: &[Prim]) -> u32 {
+    /// `emit`, with the subtrees of large nodes laid out in parallel into
+    /// arrays of their own and appended in depth-first order, so the result
+    /// is the serial layout exactly.
+    fn emit_parallel(&mut self, node: &BuildNode, prims: &[Prim], order: &[u32]) -> u32 {
+        if node.count() <= PARALLEL_EMIT || matches!(node, BuildNode::Leaf { .. }) {
+            return self.emit(node, prims, order);
+        }
+        let (kids, n_kids) = collapse::<W>(node);
+        let idx = self.push_node();
+        let parts: Vec<(Arrays<W>, u32)> = kids[..n_kids]
+            .par_iter()
+            .map(|k| {
+                let mut a = Arrays::with_room_for(k.count());
+                let code = a.emit_parallel(k, prims, order);
+                (a, code)
+            })
+            .collect();
+        for (lane, (part, code)) in parts.into_iter().enumerate() {
+            let code = self.append(part, code);
+            self.set_child(idx, lane, kids[lane].bounds(), code);
+        }
+        idx as u32
+    }
+
+    fn push_node(&mut self) -> usize {
+        self.nodes.push(Node { bounds: [[f32::INFINITY; W], [f32::INFINITY; W], [f32::INFINITY; W], [f32::NEG_INFINITY; W], [f32::NEG_INFINITY; W], [f32::NEG_INFINITY; W]], child: [EMPTY; W] });
+        self.nodes.len() - 1
+    }
+
+    fn set_child(&mut self, idx: usize, lane: usize, b: &Aabb, code: u32) {
+        let n = &mut self.nodes[idx];
+        for a in 0..3 {
+            n.bounds[a][lane] = b.min[a];
+            n.bounds[3 + a][lane] = b.max[a];
+        }
+        n.child[lane] = code;
+    }
+
+    /// Append `part` (laid out on its own, root `code`), shifting its
+    /// indices; returns the root's code here.
+    fn append(&mut self, part: Arrays<W>, code: u32) -> u32 {
+        let (nodes, groups, leaves, spheres) = (self.nodes.len() as u32, self.groups.len() as u32, self.leaves.len() as u32, self.spheres.len() as u32);
+        let mut extra_leaves = Vec::new();
+        let mut fix = |c: u32| -> u32 {
+            if c == EMPTY {
+                c
+            } else if c & LEAF_BIT == 0 {
+                c + nodes
+            } else if c & INLINE_BIT == 0 {
+                LEAF_BIT | ((c & !LEAF_BIT) + leaves)
+            } else {
+                let g = (c & INLINE_GROUP_LIMIT) + groups;
+                if g < INLINE_GROUP_LIMIT {
+                    (c & !INLINE_GROUP_LIMIT) | g
+                } else {
+                    // Beyond the inline field's range: a leaf record instead.
+                    extra_leaves.push(Leaf { group: g, n_groups: (c >> 28) & 3, sphere: 0, n_spheres: 0 });
+                    LEAF_BIT | (leaves + part.leaves.len() as u32 + extra_leaves.len() as u32 - 1)
+                }
+            }
+        };
+        let root = fix(code);
+        self.nodes.extend(part.nodes.iter().map(|n| {
+            let mut n = *n;
+            for c in n.child.iter_mut() {
+                *c = fix(*c);
+            }
+            n
+        }));
+        self.leaves.extend(part.leaves.iter().map(|l| Leaf { group: l.group + groups, sphere: l.sphere + spheres, ..*l }));
+        self.leaves.extend(extra_leaves);
+        assert!(self.leaves.len() < INLINE_BIT as usize, "too many leaf records");
+        self.groups.extend(part.groups);
+        self.ids.extend(part.ids);
+        self.spheres.extend(part.spheres);
+        root
+    }
+
+    fn emit_leaf(&mut self, prims: &[Prim], order: &[u32]) -> u32 {
         let group = self.groups.len() as u32;
         let sphere = self.spheres.len() as u32;
-        let tris: Vec<&Prim> = prims.iter().filter(|p| !p.is_sphere()).collect();
-        self.spheres.extend(prims.iter().filter(|p| p.is_sphere()).copied());
-        for chunk in tris.chunks(LANES) {
+        let mut tris = order.iter().map(|&i| &prims[i as usize]).filter(|p| !p.is_sphere()).peekable();
+        while tris.peek().is_some() {
             let mut g = TriGroup { v: [[[0.0; LANES]; 3]; 3] };
+            let mut first: Option<&Prim> = None;
             for lane in 0..LANES {
-                // Padding lanes repeat the first triangle; `ids` marks them empty.
-                let p = chunk[lane.min(chunk.len() - 1)];
+                // Padding lanes repeat the group's first triangle; `ids` marks them empty.
+                let (p, real) = match tris.next() {
+                    Some(p) => (p, true),
+                    None => (first.expect("a group has a triangle"), false),
+                };
+                first.get_or_insert(p);
                 for k in 0..3 {
                     for a in 0..3 {
                         g.v[k][a][lane] = p.v[k][a];
                     }
                 }
-                self.ids.push(if lane < chunk.len() { [p.geom_id(), p.prim_id] } else { [EMPTY, EMPTY] });
+                self.ids.push(if real { [p.geom_id(), p.prim_id] } else { [EMPTY, EMPTY] });
             }
             self.groups.push(g);
         }
+        self.spheres.extend(order.iter().map(|&i| prims[i as usize]).filter(|p| p.is_sphere()));
         let leaf = Leaf { group, n_groups: self.groups.len() as u32 - group, sphere, n_spheres: self.spheres.len() as u32 - sphere };
         if leaf.n_spheres == 0 && leaf.n_groups <= 3 && group < INLINE_GROUP_LIMIT {
             return LEAF_BIT | INLINE_BIT | leaf.n_groups << 28 | group;
@@ -199,24 +304,22 @@ impl<const W: usize> WideBvh<W> {
         let tree = build_tree(&prims);
         let (mut root, mut root_area) = (EMPTY, 0.0);
         if let Some((tree, order)) = &tree {
-            let ordered: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
-            root = out.emit(tree, &ordered);
+            out = Arrays::with_room_for(prims.len());
+            root = out.emit_parallel(tree, &prims, order);
             root_area = tree.bounds().half_area() as f64;
         }
-        let mut b = WideBvh {
-            nodes: out.nodes,
-            leaves: out.leaves,
-            groups: out.groups,
-            ids: out.ids,
-            spheres: out.spheres,
-            root,
-            sah: SahCost::default(),
-            avx: W == 8 && avx_available(),
-        };
-        if root != EMPTY {
-            b.sah = b.sah_cost(root, root_area);
+        WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available() }
+    }
+
+    /// SAH cost of the built tree, as Embree's BVH statistics (`verbose=2`)
+    /// count it: expected node visits and expected 4-triangle group (or
+    /// sphere) tests for a ray through the root's box, traversal and
+    /// intersection costs both 1.
+    fn sah(&self) -> SahCost {
+        if self.root == EMPTY {
+            return SahCost::default();
         }
-        b
+        self.sah_cost(self.root, self.root_area)
     }
 
     /// Surface-area-weighted cost of the subtree `code` (whose box has half
@@ -435,19 +538,21 @@ impl<const W: usize> Traversal for WideBvh<W> {
     }
 
     fn sah_cost(&self) -> Option<(f64, f64)> {
-        Some((self.sah.nodes, self.sah.leaves))
+        let sah = self.sah();
+        Some((sah.nodes, sah.leaves))
     }
 
     fn describe(&self) -> String {
+        let sah = self.sah();
         format!(
             "native ({W}-wide BVH, binned SAH, {}, {} nodes, {} triangle groups of 4, {} leaf records, SAH cost {:.2} = nodes {:.2} + leaves {:.2})",
             if self.avx { "AVX2" } else { "SSE2" },
             self.nodes.len(),
             self.groups.len(),
             self.leaves.len(),
-            self.sah.nodes + self.sah.leaves,
-            self.sah.nodes,
-            self.sah.leaves
+            sah.nodes + sah.leaves,
+            sah.nodes,
+            sah.leaves
         )
     }
 
@@ -499,6 +604,16 @@ impl<const W: usize> Traversal for WideBvh<W> {
             return unsafe { self.closest_coherent_avx(rays, hits) };
         }
         self.closest_all::<false>(rays, hits)
+    }
+
+    fn occluded_coherent(&self, rays: &[Ray], out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len());
+        #[cfg(target_arch = "x86_64")]
+        if self.avx && W == 8 {
+            // SAFETY: as above.
+            return unsafe { self.any_coherent_avx(rays, out) };
+        }
+        self.any_all::<false>(rays, out)
     }
 }
 
@@ -812,14 +927,21 @@ mod tests {
     #[test]
     fn frustum_accepts_coherent_packets() {
         let rays = tight_packets(100, 4);
-        let accepted = rays.chunks(frustum::PACKET).filter(|p| frustum::Frustum::new(p).is_some()).count();
+        let accepted = rays.chunks(frustum::PACKET).filter(|p| frustum::Frustum::new(p, false).is_some()).count();
         // The tight three quarters all share signs unless a direction
         // component is within 1e-3 of zero.
         assert!(accepted >= 70, "only {accepted} of 100 packets traced as frusta");
         let mut mixed = rays[..16].to_vec();
         mixed[3].dir.x = -mixed[0].dir.x;
-        assert!(frustum::Frustum::new(&mixed).is_none(), "mixed direction signs must fall back to single rays");
+        assert!(frustum::Frustum::new(&mixed, false).is_none(), "mixed direction signs must fall back to single rays");
         mixed[3] = Ray::new(mixed[0].origin, Vec3::new(0.0, 1.0, 1.0));
-        assert!(frustum::Frustum::new(&mixed).is_none(), "a zero direction component must fall back");
+        assert!(frustum::Frustum::new(&mixed, false).is_none(), "a zero direction component must fall back");
+        // A fanned-out packet (shadow rays near their light) is traced as a
+        // frustum only when the caller does not limit the spread.
+        let o = Vec3::new(0.5, 0.5, 0.5);
+        let fan: Vec<Ray> = (0..16).map(|i| Ray::new(o, Vec3::new(1.0, 0.3 + 0.05 * i as f32, 0.5))).collect();
+        assert!(frustum::Frustum::new(&fan, false).is_some());
+        assert!(frustum::Frustum::new(&fan, true).is_none(), "a packet fanned out over 0.75 rad must be traced ray by ray");
+        assert!(frustum::Frustum::new(&fan[..2], true).is_some(), "two rays 0.05 apart stay a frustum");
     }
 }
