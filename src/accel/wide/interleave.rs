@@ -1,0 +1,155 @@
+//! Incoherent closest-hit batches over large structures traced
+//! `IN_FLIGHT` rays at a time, step by step in turn, so one ray's node fetch
+//! from memory overlaps the other rays' box and triangle tests.
+//!
+//! On the 1M-triangle mesh, random rays spent 42 % of their samples on the
+//! instruction after a node load: a lone ray's traversal is a chain of
+//! dependent cache misses. Independent walkers in one loop give the
+//! out-of-order core several chains to work on. Each ray still takes exactly
+//! the single-ray path (same tests, same order), so answers are identical.
+
+use super::{Shear, Slab, WideBvh, EMPTY, LEAF_BIT, STACK};
+use crate::accel::prims::closer;
+use crate::accel::Hit;
+use crate::geometry::RayTransform;
+use crate::ray::Ray;
+use std::mem::MaybeUninit;
+
+/// Rays in flight per thread: 4 measured best of 2, 4 and 8 for random
+/// rays on the 1M-triangle mesh.
+const IN_FLIGHT: usize = 4;
+
+/// One ray's traversal state between steps.
+struct Walker {
+    /// Index of the ray in the batch.
+    ray: usize,
+    rt: RayTransform,
+    shear: Shear,
+    slab: Slab,
+    tmax: f32,
+    best: Option<Hit>,
+    cur: u32,
+    sp: usize,
+    stack: [MaybeUninit<(u32, f32)>; STACK],
+}
+
+impl Walker {
+    fn idle() -> Walker {
+        let r = Ray::new(glam::Vec3::ZERO, glam::Vec3::X);
+        let rt = RayTransform::new(r.origin, r.dir);
+        Walker { ray: usize::MAX, shear: Shear::new(&rt), rt, slab: Slab::new(&r), tmax: 0.0, best: None, cur: EMPTY, sp: 0, stack: [MaybeUninit::uninit(); STACK] }
+    }
+
+    fn start(&mut self, i: usize, r: &Ray, root: u32) {
+        self.ray = i;
+        self.rt = RayTransform::new(r.origin, r.dir);
+        self.shear = Shear::new(&self.rt);
+        self.slab = Slab::new(r);
+        self.tmax = r.tmax;
+        self.best = None;
+        self.cur = root;
+        self.sp = 0;
+    }
+}
+
+impl<const W: usize> WideBvh<W> {
+    /// `hits[i]` = the closest hit of `rays[i]`, `IN_FLIGHT` rays at a time.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 (`self.avx`).
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest_interleaved_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        if self.root == EMPTY {
+            hits.fill(None);
+            return;
+        }
+        let mut next = 0;
+        // The next valid ray, answering invalid ones on the way.
+        let mut take = |hits: &mut [Option<Hit>]| -> Option<usize> {
+            while next < rays.len() {
+                let i = next;
+                next += 1;
+                if rays[i].is_valid() {
+                    return Some(i);
+                }
+                hits[i] = None;
+            }
+            None
+        };
+        let mut w: [Walker; IN_FLIGHT] = std::array::from_fn(|_| Walker::idle());
+        let mut live = 0u32;
+        for k in 0..IN_FLIGHT {
+            if let Some(i) = take(hits) {
+                w[k].start(i, &rays[i], self.root);
+                live |= 1 << k;
+            }
+        }
+        while live != 0 {
+            for k in 0..IN_FLIGHT {
+                if live & (1 << k) == 0 {
+                    continue;
+                }
+                let wk = &mut w[k];
+                if self.step(wk, &rays[wk.ray]) {
+                    hits[wk.ray] = wk.best;
+                    match take(hits) {
+                        Some(i) => wk.start(i, &rays[i], self.root),
+                        None => live &= !(1 << k),
+                    }
+                }
+            }
+        }
+    }
+
+    /// Advance `w` by one node or leaf; true when its traversal is over.
+    #[inline(always)]
+    unsafe fn step(&self, w: &mut Walker, ray: &Ray) -> bool {
+        if w.cur & LEAF_BIT != 0 {
+            let leaf = self.leaf_of(w.cur);
+            let (best, tmax) = (&mut w.best, &mut w.tmax);
+            self.leaf(&leaf, ray, &w.rt, &w.shear, *tmax, &mut |h| {
+                if closer(h, best) {
+                    *tmax = h.t;
+                    *best = Some(h);
+                }
+                false
+            });
+        } else {
+            let node = &self.nodes[w.cur as usize];
+            let mut near = [0.0f32; W];
+            let mask = w.slab.test::<W, true>(node, ray.tmin, w.tmax, &mut near);
+            if mask != 0 {
+                if mask & (mask - 1) == 0 {
+                    w.cur = node.child[mask.trailing_zeros() as usize];
+                    return false;
+                }
+                let base = w.sp;
+                let mut m = mask;
+                while m != 0 {
+                    let lane = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let code = node.child[lane];
+                    self.prefetch(code);
+                    w.stack[w.sp].write((code, near[lane]));
+                    w.sp += 1;
+                }
+                let pushed = std::slice::from_raw_parts_mut(w.stack[base..w.sp].as_mut_ptr() as *mut (u32, f32), w.sp - base);
+                super::sort_far_first(pushed, |e| e.1);
+                w.sp -= 1;
+                w.cur = pushed[pushed.len() - 1].0;
+                return false;
+            }
+        }
+        loop {
+            if w.sp == 0 {
+                return true;
+            }
+            w.sp -= 1;
+            let (code, dist) = w.stack[w.sp].assume_init();
+            if dist <= w.tmax {
+                w.cur = code;
+                return false;
+            }
+        }
+    }
+}
