@@ -153,7 +153,7 @@ impl Drop for BuildNode {
 /// Binned-SAH build over `prims`: the tree and the primitive order its leaves
 /// index. `None` for no primitives.
 pub(super) fn build_tree(prims: &[Prim]) -> Option<(BuildNode, Vec<u32>)> {
-    let mut refs: Vec<PrimRef> = super::huge::vec_with_capacity(prims.len());
+    let mut refs: Vec<PrimRef> = Vec::with_capacity(prims.len());
     refs.par_extend(prims.par_iter().enumerate().map(|(i, p)| PrimRef::new(&p.bounds(), i as u32)));
     if refs.is_empty() {
         return None;

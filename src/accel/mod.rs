@@ -8,7 +8,6 @@ pub mod brute;
 pub mod bvh;
 pub mod wide;
 pub mod embree;
-mod huge;
 pub mod prims;
 
 use crate::error::Result;

@@ -45,8 +45,9 @@ impl Frustum {
     /// with `limit_spread` (shadow rays), when they fan out by more than
     /// `MAX_SPREAD`. Camera rays skip that check: normalising every
     /// direction cost 13 % of their throughput on the cow, and pinhole
-    /// packets of adjacent pixels never fan out.
-    pub(super) fn new(rays: &[Ray], limit_spread: bool) -> Option<Frustum> {
+    /// packets of adjacent pixels never fan out. `slabs[i]` is
+    /// `Slab::new(&rays[i])`, whose reciprocals the interval ray reuses.
+    pub(super) fn new(rays: &[Ray], slabs: &[Slab], limit_spread: bool) -> Option<Frustum> {
         let first = rays.first()?;
         let neg = first.dir.to_array().map(|d| d.is_sign_negative());
         let mut f = Frustum {
@@ -58,7 +59,7 @@ impl Frustum {
             tmin: f32::INFINITY,
         };
         let (mut d_lo, mut d_hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for r in rays {
+        for (r, s) in rays.iter().zip(slabs) {
             if !r.is_valid() {
                 return None;
             }
@@ -70,10 +71,10 @@ impl Frustum {
                 }
             }
             for a in 0..3 {
-                let inv = 1.0 / r.dir[a];
+                let inv = s.inv[a];
                 // Zero components (infinite reciprocals) would make the
                 // interval products NaN; mixed signs change the near plane.
-                if r.dir[a] == 0.0 || !inv.is_finite() || r.dir[a].is_sign_negative() != neg[a] {
+                if !inv.is_finite() || r.dir[a].is_sign_negative() != neg[a] {
                     return None;
                 }
                 f.o_lo[a] = f.o_lo[a].min(r.origin[a]);
@@ -88,6 +89,13 @@ impl Frustum {
             return None;
         }
         Some(f)
+    }
+
+    /// `new` for rays without their slabs at hand (tests).
+    #[cfg(test)]
+    pub(super) fn of(rays: &[Ray], limit_spread: bool) -> Option<Frustum> {
+        let slabs: Vec<Slab> = rays.iter().map(Slab::new).collect();
+        Frustum::new(rays, &slabs, limit_spread)
     }
 
     /// Bit i set when some ray of the packet may enter child i in
@@ -143,8 +151,9 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn closest_coherent_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         let mut unused = [false; PACKET];
         for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            match Frustum::new(r, false) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false>(&f, r, h, &mut unused),
+            let slabs: [Slab; PACKET] = std::array::from_fn(|i| Slab::new(&r[i.min(r.len() - 1)]));
+            match Frustum::new(r, &slabs[..r.len()], false) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false>(&f, r, &slabs, h, &mut unused),
                 _ => self.closest_all::<true>(r, h),
             }
         }
@@ -158,8 +167,9 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn any_coherent_avx(&self, rays: &[Ray], out: &mut [bool]) {
         let mut unused = [None; PACKET];
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
-            match Frustum::new(r, true) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true>(&f, r, &mut unused, o),
+            let slabs: [Slab; PACKET] = std::array::from_fn(|i| Slab::new(&r[i.min(r.len() - 1)]));
+            match Frustum::new(r, &slabs[..r.len()], true) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true>(&f, r, &slabs, &mut unused, o),
                 _ => self.any_all::<true>(r, o),
             }
         }
@@ -168,14 +178,12 @@ impl<const W: usize> WideBvh<W> {
     /// Closest hits into `hits` or, with `ANY`, occlusion into `occluded`
     /// (rays leave the packet once occluded).
     #[inline(always)]
-    unsafe fn frustum_packet<const ANY: bool>(&self, f: &Frustum, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
+    unsafe fn frustum_packet<const ANY: bool>(&self, f: &Frustum, rays: &[Ray], slabs: &[Slab; PACKET], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
         let n = rays.len();
-        let mut slabs: [MaybeUninit<Slab>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut shears: [MaybeUninit<Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut tmax = [0.0f32; PACKET];
         for (i, r) in rays.iter().enumerate() {
-            slabs[i].write(Slab::new(r));
             let rt = RayTransform::new(r.origin, r.dir);
             shears[i].write(Shear::new(&rt));
             rts[i].write(rt);
@@ -187,7 +195,7 @@ impl<const W: usize> WideBvh<W> {
             }
         }
         let mut active: u64 = (1u64 << n) - 1;
-        let slab = |i: usize| slabs[i].assume_init_ref();
+        let slab = |i: usize| &slabs[i];
         let mut far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
         let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
         let mut sp = 0;
@@ -205,6 +213,12 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             if mask & leaves != 0 {
+                // Start fetching the leaves while the rays test the node.
+                let mut m = mask & leaves;
+                while m != 0 {
+                    self.prefetch(node.child[m.trailing_zeros() as usize]);
+                    m &= m - 1;
+                }
                 let mut rays_left = active;
                 while rays_left != 0 {
                     let i = rays_left.trailing_zeros() as usize;
