@@ -1,7 +1,7 @@
 //! The native backend's build: a binary BVH by binned SAH (parallel with
-//! rayon on large subtrees), which `bvh4` collapses into its 4-wide layout.
+//! rayon on large subtrees), which `wide` collapses into its W-wide layout.
 //!
-//! Box tests (in `bvh4`) follow Ize (2013): the far slab distance is enlarged
+//! Box tests (in `wide`) follow Ize (2013): the far slab distance is enlarged
 //! by `ROBUST_SCALE` = 1 + 2*gamma(3), so rounding can never cull a box the ray
 //! really enters; with the watertight triangle test, closed meshes stay closed.
 
@@ -25,7 +25,11 @@ fn bins_for(n: usize) -> usize {
         _ => 32,
     }
 }
-/// Cost of one node visit relative to one primitive test, for the SAH.
+/// Cost of a binary split relative to one block test, for the SAH. About
+/// three binary splits make one 8-wide node visit, so a full node visit's
+/// cost of 1 would overcharge them: with 1.0 the 1M-triangle tree's leaves
+/// cost 3.78 expected block tests (Embree's 2.89), with 0.5 its SAH cost,
+/// 15.81, matches Embree's 15.80.
 const TRAVERSAL_COST: f32 = 0.5;
 /// Leaves are tested `BLOCK` triangles at a time (`wide::LANES`), so the SAH
 /// counts a side's primitives in whole blocks, as Embree's builder does: a
@@ -47,7 +51,7 @@ const PARALLEL_THRESHOLD: usize = 4096;
 const PARALLEL_BINNING: usize = 1 << 16;
 const BIN_CHUNK: usize = 1 << 14;
 /// Past this depth splits are medians: at most 32 more levels, so the
-/// traversal stacks in `bvh4` are bounded.
+/// traversal stacks in `wide` are bounded.
 const MAX_SAH_DEPTH: usize = 64;
 
 /// Build-time primitive reference: the primitive's box as two SIMD vectors,
