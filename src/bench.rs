@@ -220,6 +220,28 @@ fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize
     rays.len() as f64 / best / 1e6
 }
 
+/// Embree's own SAH cost for the scene `name`, from the BVH statistics it
+/// prints with `verbose=2`: a child `pathtracer bench` run builds the scene
+/// with Embree alone and this parses its `total : sah = X` line. `None`
+/// where that is not possible (not running as the `pathtracer` binary, the
+/// line missing).
+fn embree_sah(name: &str) -> Option<f64> {
+    let exe = std::env::current_exe().ok()?;
+    if !exe.file_name()?.to_string_lossy().starts_with("pathtracer") {
+        return None;
+    }
+    let out = std::process::Command::new(exe)
+        .args(["bench", name, "--backends", "embree", "--no-render", "--rays", "16"])
+        .env("PATHTRACER_EMBREE_CONFIG", "verbose=2")
+        .stdin(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .output()
+        .ok()?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text.lines().find(|l| l.trim_start().starts_with("total") && l.contains("sah ="))?;
+    line.split("sah =").nth(1)?.split_whitespace().next()?.parse().ok()
+}
+
 /// One row of the CSV: `scene, rays, threads, backend, mrays_per_s`.
 pub struct Sample {
     pub scene: String,
@@ -381,7 +403,16 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let scene = load_bench_scene(name)?;
         let prims = scene.primitive_count();
         let camera = Camera::from_scene(&scene);
-        let cam_all = camera_rays(&camera, 1024, 768);
+        // 1024x768 camera rays (repeated up to `--rays`); fewer rays make a
+        // smaller image of the whole frame, so shadow rays still start on
+        // what the camera sees.
+        let (w, h) = if args.rays >= 1024 * 768 {
+            (1024, 768)
+        } else {
+            let w = ((args.rays as f64 * 4.0 / 3.0).sqrt() as u32).max(4);
+            (w, (args.rays as u32 / w).max(3))
+        };
+        let cam_all = camera_rays(&camera, w, h);
         let cam: Vec<Ray> = cam_all.iter().cycle().take(args.rays).copied().collect();
         let rnd = random_rays(&scene, args.rays, 1);
         let mut shadow: Option<Vec<Ray>> = None;
@@ -430,7 +461,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 cells = cells.iter().flat_map(|&c| [c, c]).collect();
             }
             if let Some((nodes, leaves)) = a.sah_cost() {
-                let _ = writeln!(sah_rows, "| {} | {} | {:.3} | {:.3} | {:.3} |", scene.name, kind, nodes, leaves, nodes + leaves);
+                let total = nodes + leaves;
+                let embree = if backends.contains(&BackendKind::Embree) { embree_sah(name) } else { None };
+                let (e, r) = embree.map_or(("–".to_string(), "–".to_string()), |e| (format!("{e:.3}"), format!("{:.3}", total / e)));
+                let _ = writeln!(sah_rows, "| {} | {} | {:.3} | {:.3} | {:.3} | {e} | {r} |", scene.name, kind, nodes, leaves, total);
             }
             let mem = a.memory_bytes() as f64;
             let _ = writeln!(
@@ -482,12 +516,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if !sah_rows.is_empty() {
         let _ = writeln!(
             md,
-            "\nSAH cost of the native tree, counted as Embree's BVH statistics count it (PATHTRACER_EMBREE_CONFIG=verbose=2 prints Embree's): \
-             expected node visits + expected 4-triangle block tests per ray through the root box. The node part depends on the width \
-             (Embree builds 8-wide here), the leaf part on the build:\n"
+            "\nSAH cost of the native tree, counted as Embree's BVH statistics count it: \
+             expected node visits + expected 4-triangle block tests per ray through the root box. Embree's total is read from its own \
+             statistics (a child `pathtracer bench` run with PATHTRACER_EMBREE_CONFIG=verbose=2, line `total : sah = ...`):\n"
         );
-        let _ = writeln!(md, "| scene | backend | nodes | leaves | total |");
-        let _ = writeln!(md, "|---|---|---:|---:|---:|");
+        let _ = writeln!(md, "| scene | backend | nodes | leaves | total | Embree total | native ÷ Embree |");
+        let _ = writeln!(md, "|---|---|---:|---:|---:|---:|---:|");
         md.push_str(&sah_rows);
     }
     if !mode_rows.is_empty() {

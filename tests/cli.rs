@@ -206,3 +206,45 @@ fn depth_and_object_id_images_describe_the_first_hit() {
     }
     assert!(checked > 100, "only {checked} back-wall pixels");
 }
+
+/// `pathtracer bench` writes the CSV and Markdown the README is generated
+/// from: one CSV row per scene, ray kind, thread count and backend, and the
+/// native ÷ Embree and SAH tables when Embree is built in. Checks the shape
+/// of the output, not speeds.
+#[test]
+fn bench_writes_csv_and_markdown_tables() {
+    let d = scratch("bench");
+    let cow = common::scene_path("meshedit", "cow");
+    let out = run(&d, &["bench", cow.to_str().unwrap(), "--rays", "4096", "--no-render", "--csv", "b.csv", "--markdown", "b.md"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let csv = std::fs::read_to_string(d.join("b.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("scene,rays,threads,backend,mrays_per_s"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let embree = pathtracer::accel::embree::available();
+    let backends: Vec<&str> = if embree { vec!["native", "embree", "brute"] } else { vec!["native", "brute"] };
+    let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let thread_counts = if threads > 1 { 2 } else { 1 };
+    assert_eq!(rows.len(), 3 * backends.len() * thread_counts, "{csv}");
+    for b in &backends {
+        for kind in ["camera", "shadow", "random"] {
+            let row = rows.iter().find(|r| r[0] == "cow" && r[1] == kind && r[3] == *b && r[2] == "1");
+            let row = row.unwrap_or_else(|| panic!("no 1-thread {kind} row for {b}: {csv}"));
+            let m: f64 = row[4].parse().unwrap();
+            assert!(m.is_finite() && m > 0.0, "{row:?}");
+        }
+    }
+    let md = std::fs::read_to_string(d.join("b.md")).unwrap();
+    assert!(stdout.contains("| cow | 5856 | native |"), "{stdout}");
+    assert!(md.contains("| cow | 5856 | native |") && md.contains("| scene | backend | nodes | leaves | total |"), "{md}");
+    if embree {
+        assert!(md.contains("native ÷ Embree throughput"), "{md}");
+        // Embree's own SAH statistics were read back for the comparison.
+        let sah = md.lines().find(|l| l.starts_with("| cow | native | ")).unwrap();
+        let cells: Vec<&str> = sah.split('|').map(str::trim).collect();
+        let ratio: f64 = cells[7].parse().unwrap_or_else(|_| panic!("no native ÷ Embree SAH ratio: {sah}"));
+        assert!(ratio > 0.5 && ratio < 2.0, "{sah}");
+    } else {
+        eprintln!("note: Embree is not built in; the bench's Embree columns were not checked");
+    }
+}
