@@ -19,6 +19,7 @@ use crate::accel::prims::closer;
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
+use glam::Vec3A;
 use std::mem::MaybeUninit;
 
 /// Rays per packet.
@@ -45,57 +46,45 @@ impl Frustum {
     /// with `limit_spread` (shadow rays), when they fan out by more than
     /// `MAX_SPREAD`. Camera rays skip that check: normalising every
     /// direction cost 13 % of their throughput on the cow, and pinhole
-    /// packets of adjacent pixels never fan out. `slabs[i]` is
-    /// `Slab::new(&rays[i])`, whose reciprocals the interval ray reuses.
-    pub(super) fn new(rays: &[Ray], slabs: &[Slab], limit_spread: bool) -> Option<Frustum> {
+    /// packets of adjacent pixels never fan out. The reciprocals are the
+    /// slab test's (`Slab::new`), one SIMD division per ray.
+    pub(super) fn new(rays: &[Ray], limit_spread: bool) -> Option<Frustum> {
         let first = rays.first()?;
-        let neg = first.dir.to_array().map(|d| d.is_sign_negative());
-        let mut f = Frustum {
-            o_lo: [f32::INFINITY; 3],
-            o_hi: [f32::NEG_INFINITY; 3],
-            inv_lo: [f32::INFINITY; 3],
-            inv_hi: [f32::NEG_INFINITY; 3],
-            near_plane: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
-            tmin: f32::INFINITY,
-        };
-        let (mut d_lo, mut d_hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for (r, s) in rays.iter().zip(slabs) {
-            if !r.is_valid() {
+        let neg = first.dir.is_negative_bitmask();
+        let (mut o_lo, mut o_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        let (mut i_lo, mut i_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        let (mut d_lo, mut d_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        let mut tmin = f32::INFINITY;
+        for r in rays {
+            let (o, d) = (Vec3A::from(r.origin), Vec3A::from(r.dir));
+            let inv = Vec3A::ONE / d;
+            // Zero components (infinite reciprocals) would make the interval
+            // products NaN; mixed signs change the near plane.
+            if !r.is_valid() || !inv.is_finite() || d.is_negative_bitmask() != neg {
                 return None;
             }
             if limit_spread {
-                let d = r.dir.normalize();
-                for a in 0..3 {
-                    d_lo[a] = d_lo[a].min(d[a]);
-                    d_hi[a] = d_hi[a].max(d[a]);
-                }
+                let u = d.normalize();
+                d_lo = d_lo.min(u);
+                d_hi = d_hi.max(u);
             }
-            for a in 0..3 {
-                let inv = s.inv[a];
-                // Zero components (infinite reciprocals) would make the
-                // interval products NaN; mixed signs change the near plane.
-                if !inv.is_finite() || r.dir[a].is_sign_negative() != neg[a] {
-                    return None;
-                }
-                f.o_lo[a] = f.o_lo[a].min(r.origin[a]);
-                f.o_hi[a] = f.o_hi[a].max(r.origin[a]);
-                f.inv_lo[a] = f.inv_lo[a].min(inv);
-                f.inv_hi[a] = f.inv_hi[a].max(inv);
-            }
-            f.tmin = f.tmin.min(r.tmin);
+            o_lo = o_lo.min(o);
+            o_hi = o_hi.max(o);
+            i_lo = i_lo.min(inv);
+            i_hi = i_hi.max(inv);
+            tmin = tmin.min(r.tmin);
         }
-        let spread = (0..3).map(|a| d_hi[a] - d_lo[a]).fold(0.0f32, f32::max);
-        if limit_spread && spread > MAX_SPREAD {
+        if limit_spread && (d_hi - d_lo).max_element() > MAX_SPREAD {
             return None;
         }
-        Some(f)
-    }
-
-    /// `new` for rays without their slabs at hand (tests).
-    #[cfg(test)]
-    pub(super) fn of(rays: &[Ray], limit_spread: bool) -> Option<Frustum> {
-        let slabs: Vec<Slab> = rays.iter().map(Slab::new).collect();
-        Frustum::new(rays, &slabs, limit_spread)
+        Some(Frustum {
+            o_lo: o_lo.to_array(),
+            o_hi: o_hi.to_array(),
+            inv_lo: i_lo.to_array(),
+            inv_hi: i_hi.to_array(),
+            near_plane: [0, 1, 2].map(|a| if neg & (1 << a) != 0 { 3 + a } else { a }),
+            tmin,
+        })
     }
 
     /// Bit i set when some ray of the packet may enter child i in
@@ -151,9 +140,8 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn closest_coherent_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         let mut unused = [false; PACKET];
         for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            let slabs: [Slab; PACKET] = std::array::from_fn(|i| Slab::new(&r[i.min(r.len() - 1)]));
-            match Frustum::new(r, &slabs[..r.len()], false) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false>(&f, r, &slabs, h, &mut unused),
+            match Frustum::new(r, false) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false>(&f, r, h, &mut unused),
                 _ => self.closest_all::<true>(r, h),
             }
         }
@@ -167,9 +155,8 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn any_coherent_avx(&self, rays: &[Ray], out: &mut [bool]) {
         let mut unused = [None; PACKET];
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
-            let slabs: [Slab; PACKET] = std::array::from_fn(|i| Slab::new(&r[i.min(r.len() - 1)]));
-            match Frustum::new(r, &slabs[..r.len()], true) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true>(&f, r, &slabs, &mut unused, o),
+            match Frustum::new(r, true) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true>(&f, r, &mut unused, o),
                 _ => self.any_all::<true>(r, o),
             }
         }
@@ -178,15 +165,17 @@ impl<const W: usize> WideBvh<W> {
     /// Closest hits into `hits` or, with `ANY`, occlusion into `occluded`
     /// (rays leave the packet once occluded).
     #[inline(always)]
-    unsafe fn frustum_packet<const ANY: bool>(&self, f: &Frustum, rays: &[Ray], slabs: &[Slab; PACKET], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
+    unsafe fn frustum_packet<const ANY: bool>(&self, f: &Frustum, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
         let n = rays.len();
+        // Per-ray constants are set up the first time a ray tests a node
+        // itself: packets that leave the tree high up (background pixels)
+        // never pay for them.
+        let mut slabs: [MaybeUninit<Slab>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut shears: [MaybeUninit<Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
+        let mut ready: u64 = 0;
         let mut tmax = [0.0f32; PACKET];
         for (i, r) in rays.iter().enumerate() {
-            let rt = RayTransform::new(r.origin, r.dir);
-            shears[i].write(Shear::new(&rt));
-            rts[i].write(rt);
             tmax[i] = r.tmax;
             if ANY {
                 occluded[i] = false;
@@ -195,7 +184,6 @@ impl<const W: usize> WideBvh<W> {
             }
         }
         let mut active: u64 = (1u64 << n) - 1;
-        let slab = |i: usize| &slabs[i];
         let mut far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
         let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
         let mut sp = 0;
@@ -224,7 +212,14 @@ impl<const W: usize> WideBvh<W> {
                     let i = rays_left.trailing_zeros() as usize;
                     rays_left &= rays_left - 1;
                     let mut ray_near = [0.0f32; W];
-                    let mut todo = slab(i).test::<W, true>(node, rays[i].tmin, tmax[i], &mut ray_near) & mask & leaves;
+                    if ready & (1u64 << i) == 0 {
+                        ready |= 1u64 << i;
+                        slabs[i].write(Slab::new(&rays[i]));
+                        let rt = RayTransform::new(rays[i].origin, rays[i].dir);
+                        shears[i].write(Shear::new(&rt));
+                        rts[i].write(rt);
+                    }
+                    let mut todo = slabs[i].assume_init_ref().test::<W, true>(node, rays[i].tmin, tmax[i], &mut ray_near) & mask & leaves;
                     while todo != 0 {
                         let lane = todo.trailing_zeros() as usize;
                         todo &= todo - 1;

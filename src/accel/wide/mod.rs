@@ -975,21 +975,21 @@ mod tests {
     #[test]
     fn frustum_accepts_coherent_packets() {
         let rays = tight_packets(100, 4);
-        let accepted = rays.chunks(frustum::PACKET).filter(|p| frustum::Frustum::of(p, false).is_some()).count();
+        let accepted = rays.chunks(frustum::PACKET).filter(|p| frustum::Frustum::new(p, false).is_some()).count();
         // The tight three quarters all share signs unless a direction
         // component is within 1e-3 of zero.
         assert!(accepted >= 70, "only {accepted} of 100 packets traced as frusta");
         let mut mixed = rays[..16].to_vec();
         mixed[3].dir.x = -mixed[0].dir.x;
-        assert!(frustum::Frustum::of(&mixed, false).is_none(), "mixed direction signs must fall back to single rays");
+        assert!(frustum::Frustum::new(&mixed, false).is_none(), "mixed direction signs must fall back to single rays");
         mixed[3] = Ray::new(mixed[0].origin, Vec3::new(0.0, 1.0, 1.0));
-        assert!(frustum::Frustum::of(&mixed, false).is_none(), "a zero direction component must fall back");
+        assert!(frustum::Frustum::new(&mixed, false).is_none(), "a zero direction component must fall back");
         // A fanned-out packet (shadow rays near their light) is traced as a
         // frustum only when the caller does not limit the spread.
         let o = Vec3::new(0.5, 0.5, 0.5);
         let fan: Vec<Ray> = (0..16).map(|i| Ray::new(o, Vec3::new(1.0, 0.3 + 0.05 * i as f32, 0.5))).collect();
-        assert!(frustum::Frustum::of(&fan, false).is_some());
-        assert!(frustum::Frustum::of(&fan, true).is_none(), "a packet fanned out over 0.75 rad must be traced ray by ray");
-        assert!(frustum::Frustum::of(&fan[..2], true).is_some(), "two rays 0.05 apart stay a frustum");
+        assert!(frustum::Frustum::new(&fan, false).is_some());
+        assert!(frustum::Frustum::new(&fan, true).is_none(), "a packet fanned out over 0.75 rad must be traced ray by ray");
+        assert!(frustum::Frustum::new(&fan[..2], true).is_some(), "two rays 0.05 apart stay a frustum");
     }
 }
