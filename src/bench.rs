@@ -220,6 +220,26 @@ fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize
     rays.len() as f64 / best / 1e6
 }
 
+/// The CPU's model name and the SIMD extensions the backends can use, so a
+/// table says what it was measured on.
+fn cpu_model() -> String {
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| t.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).map(|m| m.trim().to_string()))
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+    #[cfg(target_arch = "x86_64")]
+    let isa = if is_x86_feature_detected!("avx512f") {
+        "AVX-512"
+    } else if is_x86_feature_detected!("avx2") {
+        "AVX2"
+    } else {
+        "SSE2"
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let isa = "no x86 SIMD";
+    format!("{model} ({isa})")
+}
+
 /// Embree's own SAH cost for the scene `name`, from the BVH statistics it
 /// prints with `verbose=2`: a child `pathtracer bench` run builds the scene
 /// with Embree alone and this parses its `total : sah = X` line. `None`
@@ -392,6 +412,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     let mut md = String::new();
     let mut samples: Vec<Sample> = Vec::new();
+    let _ = writeln!(md, "Machine: {}, {all} threads.\n", cpu_model());
     let _ = writeln!(md, "Throughput in Mrays/s (best of 3; brute on a 1/32 subset). Threads: 1 and {all}. Build: best of {BUILD_REPS} builds on {all} threads.\n");
     let _ = writeln!(md, "| scene | prims | backend | build ms | MiB | B/prim | camera 1T | camera {all}T | shadow 1T | shadow {all}T | random 1T | random {all}T |");
     let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
