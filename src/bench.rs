@@ -356,7 +356,7 @@ fn path_render_rows(name: &str, backends: &[BackendKind], threads: usize) -> Res
         };
         for batch in [true, false] {
             let mut settings = RenderSettings::new(480, 360, 64, 1);
-            settings.batch_camera_rays = batch;
+            settings.batch_rays = batch;
             let out = render::render(&cam, &integ, &settings);
             let same = match &first {
                 None => {
@@ -561,10 +561,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let backends: Vec<BackendKind> = backends.iter().copied().filter(|b| *b != BackendKind::Brute).collect();
         let _ = writeln!(
             md,
-            "\nPath-traced render, 480x360 (CS184 crop), 64 spp, -m 5, seed 1, {all} threads: camera rays traced per tile \
-             as one coherent batch (the renderer's default) or one at a time. Image: compared with the scene's first row, pixel by pixel:\n"
+            "\nPath-traced render, 480x360 (CS184 crop), 64 spp, -m 5, seed 1, {all} threads: rays traced in batches (the renderer's \
+             default: each sample round of a tile traces its camera rays as one coherent batch, then bounce by bounce its shadow rays \
+             as one batch and its other rays as another) or one at a time. Image: compared with the scene's first row, pixel by pixel:\n"
         );
-        let _ = writeln!(md, "| scene | backend | camera rays | render s | rays | Mrays/s | image |");
+        let _ = writeln!(md, "| scene | backend | rays traced | render s | rays | Mrays/s | image |");
         let _ = writeln!(md, "|---|---|---|---:|---:|---:|---|");
         for name in RENDER_SCENES {
             md.push_str(&path_render_rows(name, &backends, all)?);

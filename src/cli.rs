@@ -294,7 +294,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             russian_roulette: !a.no_rr,
         }),
     };
-    let settings = RenderSettings { width, height, spp, seed: a.seed, region, adaptive, progress: render::progress_wanted(), batch_camera_rays: true };
+    let settings = RenderSettings { width, height, spp, seed: a.seed, region, adaptive, progress: render::progress_wanted(), batch_rays: true };
     let start = Instant::now();
     let out = render::render(&camera, integrator.as_ref(), &settings);
     let render_s = start.elapsed().as_secs_f64();

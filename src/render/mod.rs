@@ -4,6 +4,7 @@
 pub mod aov;
 pub mod normals;
 pub mod path;
+mod wavefront;
 
 use crate::accel::{Hit, Traversal};
 use crate::camera::Camera;
@@ -28,6 +29,15 @@ pub trait Integrator: Sync {
 
     /// Radiance along `ray`, whose closest hit in `(tmin, tmax]` is `hit`.
     fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, rng: &mut Rng, rays: &mut u64) -> Vec3;
+
+    /// `out[i]` = `radiance_from(&rays[i], hits[i], rngs[i], ..)` for a batch
+    /// of camera rays; integrators that trace further rays may batch them
+    /// (the path tracer does, bounce by bounce), with identical results.
+    fn radiance_batch(&self, rays: &[Ray], hits: &[Option<Hit>], rngs: &mut [&mut Rng], out: &mut [Vec3], ray_count: &mut u64) {
+        for i in 0..rays.len() {
+            out[i] = self.radiance_from(&rays[i], hits[i], rngs[i], ray_count);
+        }
+    }
 }
 
 /// A rectangle of the frame, in CS184's frame coordinates (x right, y up from
@@ -62,14 +72,17 @@ pub struct RenderSettings {
     pub region: Option<Region>,
     pub adaptive: Option<Adaptive>,
     pub progress: bool,
-    /// Trace each round of a tile's camera rays as one coherent batch (the
-    /// default) instead of one ray at a time. The image is the same either way.
-    pub batch_camera_rays: bool,
+    /// Trace each round of a tile's camera rays as one coherent batch, and
+    /// let the integrator batch the rays that follow (the path tracer traces
+    /// each bounce's shadow rays and continuation rays as batches): the
+    /// default. Off, every ray is traced on its own. The image is the same
+    /// either way.
+    pub batch_rays: bool,
 }
 
 impl RenderSettings {
     pub fn new(width: u32, height: u32, spp: u32, seed: u64) -> Self {
-        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_camera_rays: true }
+        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_rays: true }
     }
 }
 
@@ -165,6 +178,7 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
     let mut active: Vec<usize> = (0..px.len()).filter(|&i| !px[i].done).collect();
     let mut batch: Vec<Ray> = Vec::with_capacity(active.len());
     let mut hits: Vec<Option<Hit>> = Vec::with_capacity(active.len());
+    let mut radiance: Vec<Vec3> = Vec::with_capacity(active.len());
     while !active.is_empty() {
         batch.clear();
         for &i in &active {
@@ -174,18 +188,27 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         }
         hits.clear();
         hits.resize(batch.len(), None);
-        if s.batch_camera_rays {
+        *rays += batch.len() as u64;
+        if s.batch_rays {
             accel.intersect_coherent(&batch, &mut hits);
+            // `active` lists exactly the unfinished pixels, in order.
+            let mut rngs: Vec<&mut Rng> = px.iter_mut().filter(|p| !p.done).map(|p| &mut p.rng).collect();
+            debug_assert_eq!(rngs.len(), active.len());
+            radiance.clear();
+            radiance.resize(batch.len(), Vec3::ZERO);
+            integ.radiance_batch(&batch, &hits, &mut rngs, &mut radiance, rays);
+            for (k, &i) in active.iter().enumerate() {
+                px[i].add(radiance[k], rule);
+            }
         } else {
             for (r, h) in batch.iter().zip(hits.iter_mut()) {
                 *h = accel.intersect(r);
             }
-        }
-        *rays += batch.len() as u64;
-        for (k, &i) in active.iter().enumerate() {
-            let p = &mut px[i];
-            let l = integ.radiance_from(&batch[k], hits[k], &mut p.rng, rays);
-            p.add(l, rule);
+            for (k, &i) in active.iter().enumerate() {
+                let p = &mut px[i];
+                let l = integ.radiance_from(&batch[k], hits[k], &mut p.rng, rays);
+                p.add(l, rule);
+            }
         }
         active.retain(|&i| !px[i].done);
     }

@@ -44,12 +44,12 @@ pub struct PathTracer<'a> {
 }
 
 /// The surface seen from the side the ray came from: normals flipped towards `wo`.
-struct Vertex {
-    it: Interaction,
+pub(super) struct Vertex {
+    pub it: Interaction,
     /// Geometric and shading normals on the side of `wo`.
-    ng: Vec3,
-    ns: Vec3,
-    albedo: Vec3,
+    pub ng: Vec3,
+    pub ns: Vec3,
+    pub albedo: Vec3,
 }
 
 impl PathTracer<'_> {
@@ -58,7 +58,7 @@ impl PathTracer<'_> {
         self.accel.intersect(ray).map(|h| Interaction::new(self.scene, ray, &h))
     }
 
-    fn vertex(&self, it: Interaction, wo: Vec3) -> Vertex {
+    pub(super) fn vertex(&self, it: Interaction, wo: Vec3) -> Vertex {
         let flip = if it.ng.dot(wo) < 0.0 { -1.0 } else { 1.0 };
         let ng = it.ng * flip;
         let mut ns = it.ns * flip;
@@ -107,7 +107,7 @@ impl PathTracer<'_> {
 
     /// MIS weight of the BSDF sample `wi` (pdf `pdf_b`) that reached the
     /// emitter surface at `hit`, seen from `v`.
-    fn bsdf_weight_hit(&self, v: &Vertex, hit: &Interaction, pdf_b: f32) -> f32 {
+    pub(super) fn bsdf_weight_hit(&self, v: &Vertex, hit: &Interaction, pdf_b: f32) -> f32 {
         match self.lights.of_geometry[hit.geom_id as usize] {
             Some(k) => {
                 let pl = self.lights.lights[k].pdf_hit(v.it.p, hit.p, hit.ng);
@@ -118,7 +118,7 @@ impl PathTracer<'_> {
     }
 
     /// MIS weight of a BSDF sample that escaped along `wi`.
-    fn bsdf_weight_escape(&self, wi: Vec3, pdf_b: f32) -> f32 {
+    pub(super) fn bsdf_weight_escape(&self, wi: Vec3, pdf_b: f32) -> f32 {
         let pl: f32 = self.lights.lights.iter().map(|l| l.pdf_escape(wi)).sum();
         power_heuristic(pdf_b, self.light_samples as f32 * pl)
     }
@@ -168,6 +168,10 @@ impl PathTracer<'_> {
 impl Integrator for PathTracer<'_> {
     fn accel(&self) -> &dyn Traversal {
         self.accel
+    }
+
+    fn radiance_batch(&self, rays: &[Ray], hits: &[Option<Hit>], rngs: &mut [&mut Rng], out: &mut [Vec3], ray_count: &mut u64) {
+        self.wavefront(rays, hits, rngs, out, ray_count)
     }
 
     fn radiance_from(&self, camera_ray: &Ray, hit: Option<Hit>, rng: &mut Rng, rays: &mut u64) -> Vec3 {
@@ -242,7 +246,7 @@ impl Integrator for PathTracer<'_> {
 
 /// Veach's power heuristic (beta = 2) for a sample of pdf `a` against `b`,
 /// both already multiplied by their strategies' sample counts.
-fn power_heuristic(a: f32, b: f32) -> f32 {
+pub(super) fn power_heuristic(a: f32, b: f32) -> f32 {
     let (a2, b2) = (a * a, b * b);
     if a2 + b2 > 0.0 && (a2 + b2).is_finite() {
         a2 / (a2 + b2)

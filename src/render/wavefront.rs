@@ -1,0 +1,240 @@
+//! The path tracer over a batch of camera rays (one sample round of a tile),
+//! bounce by bounce: every path's direct-light samples and continuation ray
+//! are drawn first, then all shadow rays are traced as one batch and all
+//! other rays as another, then every path adds what its rays found.
+//!
+//! Each path draws from its own random stream in exactly the order
+//! `PathTracer::radiance_from` does (visibility never changes what is drawn
+//! next), and the deferred sums are replayed in the same order, so the
+//! radiance of every path is bit-identical to the one-path-at-a-time loop:
+//! batching changes which rays travel together, never the image.
+
+use super::path::{PathTracer, Vertex};
+use crate::accel::Hit;
+use crate::light::{emitted, Target};
+use crate::ray::Ray;
+use crate::rng::Rng;
+use crate::sampling::{cosine_hemisphere, cosine_hemisphere_pdf, uniform_hemisphere, Frame, UNIFORM_HEMISPHERE_PDF};
+use crate::scene::Interaction;
+use glam::Vec3;
+use std::f32::consts::PI;
+
+/// One term of a vertex's direct-light estimate, in the order the
+/// path-at-a-time code adds them.
+enum Term {
+    /// A light sample's contribution, counted if shadow ray `ray` is unoccluded.
+    Shadow { ray: usize, value: Vec3 },
+    /// A `-H` hemisphere sample: `f * le * cos / pdf` with `le` what ray
+    /// `ray` (in the closest-hit batch) finds along `wi`.
+    Hemisphere { ray: usize, f: Vec3, wi: Vec3, cos: f32 },
+    /// End of one light's (or the hemisphere's) samples: `total += sum / n`.
+    Group { n: u32 },
+}
+
+/// One path between bounces.
+struct Path {
+    l: Vec3,
+    beta: Vec3,
+    v: Option<Vertex>,
+    bounce: u32,
+    /// Direct-light terms of the current vertex (when this bounce counts).
+    terms: Vec<Term>,
+    counted: bool,
+    /// The continuation: its ray (index in the closest-hit batch), sampled
+    /// direction, pdf and throughput, or `None` when the path ends here.
+    next: Option<(usize, Vec3, f32, Vec3)>,
+}
+
+impl PathTracer<'_> {
+    /// `out[i]` = the radiance along camera ray `rays[i]`, whose closest hit
+    /// is `hits[i]`, drawing from `rngs[i]`.
+    pub(super) fn wavefront(&self, rays: &[Ray], hits: &[Option<Hit>], rngs: &mut [&mut Rng], out: &mut [Vec3], ray_count: &mut u64) {
+        let m = self.max_depth;
+        let counts = |bounce: u32| self.accumulate || bounce == m;
+        let mut paths: Vec<Path> = rays
+            .iter()
+            .zip(hits)
+            .map(|(ray, hit)| {
+                let wo = -ray.dir.normalize();
+                let mut p = Path { l: Vec3::ZERO, beta: Vec3::ONE, v: None, bounce: 1, terms: Vec::new(), counted: false, next: None };
+                match hit.map(|h| Interaction::new(self.scene, ray, &h)) {
+                    None => {
+                        if counts(0) {
+                            p.l = self.lights.escaped(-wo);
+                        }
+                    }
+                    Some(it) => {
+                        if counts(0) {
+                            p.l = emitted(self.scene, &it, wo);
+                        }
+                        if m > 0 {
+                            p.v = Some(self.vertex(it, wo));
+                        }
+                    }
+                }
+                p
+            })
+            .collect();
+        let (mut shadow, mut closest): (Vec<Ray>, Vec<Ray>) = (Vec::new(), Vec::new());
+        let (mut occluded, mut found): (Vec<bool>, Vec<Option<Hit>>) = (Vec::new(), Vec::new());
+        loop {
+            shadow.clear();
+            closest.clear();
+            let mut live = false;
+            // Draw: direct-light samples, then the continuation, per path.
+            for (i, p) in paths.iter_mut().enumerate() {
+                let Some(v) = &p.v else { continue };
+                live = true;
+                let rng = &mut *rngs[i];
+                p.terms.clear();
+                p.counted = counts(p.bounce);
+                if p.counted {
+                    self.direct_terms(v, rng, &mut p.terms, &mut shadow, &mut closest);
+                }
+                p.next = self.continuation(v, p.bounce, p.counted, p.beta, rng).map(|(wi, pdf_b, beta_next)| {
+                    closest.push(v.it.spawn_ray(wi));
+                    (closest.len() - 1, wi, pdf_b, beta_next)
+                });
+            }
+            if !live {
+                break;
+            }
+            // Trace: shadow rays as one batch, everything else as another.
+            *ray_count += (shadow.len() + closest.len()) as u64;
+            occluded.clear();
+            occluded.resize(shadow.len(), false);
+            self.accel.occluded_coherent(&shadow, &mut occluded);
+            found.clear();
+            found.resize(closest.len(), None);
+            self.accel.intersect_batch(&closest, &mut found);
+            // Add what the rays found, in the path-at-a-time order.
+            for p in paths.iter_mut() {
+                let Some(v) = p.v.take() else { continue };
+                if p.counted {
+                    p.l += p.beta * self.replay(&p.terms, &occluded, &closest, &found);
+                }
+                let Some((k, wi, pdf_b, beta_next)) = p.next else { continue };
+                let gather = p.counted && !self.hemisphere;
+                let Some(next) = found[k].map(|h| Interaction::new(self.scene, &closest[k], &h)) else {
+                    if gather {
+                        p.l += beta_next * self.lights.escaped(wi) * self.bsdf_weight_escape(wi, pdf_b);
+                    }
+                    continue;
+                };
+                if gather {
+                    let le = emitted(self.scene, &next, -wi);
+                    if le != Vec3::ZERO {
+                        p.l += beta_next * le * self.bsdf_weight_hit(&v, &next, pdf_b);
+                    }
+                }
+                if p.bounce == m {
+                    continue;
+                }
+                p.v = Some(self.vertex(next, -wi));
+                p.beta = beta_next;
+                p.bounce += 1;
+            }
+        }
+        for (o, p) in out.iter_mut().zip(&paths) {
+            *o = p.l;
+        }
+    }
+
+    /// `PathTracer::direct` with its rays deferred: the same draws, the
+    /// terms recorded instead of summed.
+    fn direct_terms(&self, v: &Vertex, rng: &mut Rng, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) {
+        if v.albedo == Vec3::ZERO {
+            return;
+        }
+        let explicit = self.lights.lights.iter().filter(|l| !self.hemisphere || !l.is_visible());
+        for light in explicit {
+            let n = if light.is_delta() { 1 } else { self.light_samples };
+            let f = v.albedo / PI;
+            let mis = !self.hemisphere && light.is_visible();
+            for _ in 0..n {
+                let u = rng.uniform2();
+                let u_sel = rng.uniform();
+                let Some(s) = light.sample(self.scene, v.it.p, u, u_sel) else { continue };
+                let cos = s.wi.dot(v.ns);
+                if cos <= 0.0 || s.wi.dot(v.ng) <= 0.0 || s.pdf <= 0.0 {
+                    continue;
+                }
+                shadow.push(match s.target {
+                    Target::Point(q) => v.it.spawn_ray_to(q),
+                    Target::Infinite => v.it.spawn_ray(s.wi),
+                });
+                let w = if mis { super::path::power_heuristic(n as f32 * s.pdf, cosine_hemisphere_pdf(cos)) } else { 1.0 };
+                terms.push(Term::Shadow { ray: shadow.len() - 1, value: f * s.value * cos / s.pdf * w });
+            }
+            terms.push(Term::Group { n });
+        }
+        if !self.hemisphere {
+            return;
+        }
+        let visible = self.lights.lights.iter().filter(|l| l.is_visible()).count() as u32;
+        let n = visible.max(1) * self.light_samples;
+        let frame = Frame::new(v.ns);
+        let f = v.albedo / PI;
+        for _ in 0..n {
+            let (u1, u2) = rng.uniform2();
+            let wi = frame.to_world(uniform_hemisphere(u1, u2));
+            if wi.dot(v.ng) <= 0.0 {
+                continue;
+            }
+            closest.push(v.it.spawn_ray(wi));
+            terms.push(Term::Hemisphere { ray: closest.len() - 1, f, wi, cos: wi.dot(v.ns) });
+        }
+        terms.push(Term::Group { n });
+    }
+
+    /// The direct light of recorded `terms`, summed as `PathTracer::direct` sums.
+    fn replay(&self, terms: &[Term], occluded: &[bool], closest: &[Ray], found: &[Option<Hit>]) -> Vec3 {
+        let (mut total, mut sum) = (Vec3::ZERO, Vec3::ZERO);
+        for t in terms {
+            match *t {
+                Term::Shadow { ray, value } => {
+                    if !occluded[ray] {
+                        sum += value;
+                    }
+                }
+                Term::Hemisphere { ray, f, wi, cos } => {
+                    let le = match found[ray] {
+                        Some(h) => emitted(self.scene, &Interaction::new(self.scene, &closest[ray], &h), -wi),
+                        None => self.lights.escaped(wi),
+                    };
+                    sum += f * le * cos / UNIFORM_HEMISPHERE_PDF;
+                }
+                Term::Group { n } => {
+                    total += sum / n as f32;
+                    sum = Vec3::ZERO;
+                }
+            }
+        }
+        total
+    }
+
+    /// The path-at-a-time loop's decision after a vertex's direct light:
+    /// `None` when the path ends, else the BSDF-sampled direction, its pdf
+    /// and the throughput past it (after Russian roulette).
+    fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, rng: &mut Rng) -> Option<(Vec3, f32, Vec3)> {
+        let last = bounce == self.max_depth;
+        if v.albedo == Vec3::ZERO || (last && (self.hemisphere || !count)) {
+            return None;
+        }
+        let (u1, u2) = rng.uniform2();
+        let wi = Frame::new(v.ns).to_world(cosine_hemisphere(u1, u2));
+        let pdf_b = cosine_hemisphere_pdf(wi.dot(v.ns));
+        if wi.dot(v.ng) <= 0.0 || pdf_b <= 0.0 {
+            return None;
+        }
+        let mut beta_next = beta * v.albedo;
+        if self.russian_roulette && bounce >= 2 && !last {
+            let q = beta_next.max_element().min(1.0);
+            if q <= 0.0 || rng.uniform() >= q {
+                return None;
+            }
+            beta_next /= q;
+        }
+        Some((wi, pdf_b, beta_next))
+    }
+}
