@@ -738,28 +738,36 @@ impl Slab {
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
-            let mut mask = 0;
-            for lane in 0..W {
-                let (mut t0, mut t1) = (tmin, tmax);
-                for a in 0..3 {
-                    let lo = n.bounds[self.near_plane[a]][lane];
-                    let hi = n.bounds[(self.near_plane[a] + 3) % 6][lane];
-                    let tn = (lo - self.o[a]) * self.inv[a];
-                    let tf = (hi - self.o[a]) * self.inv[a] * ROBUST_SCALE;
-                    if tn > t0 {
-                        t0 = tn;
-                    }
-                    if tf < t1 {
-                        t1 = tf;
-                    }
+            self.test_scalar(n, tmin, tmax, near)
+        }
+    }
+
+    /// `test` one lane at a time, for targets without x86 SIMD (and the
+    /// unit tests, which check that every path gives the same bits).
+    #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+    fn test_scalar<const W: usize>(&self, n: &Node<W>, tmin: f32, tmax: f32, near: &mut [f32; W]) -> u32 {
+        let mut mask = 0;
+        for lane in 0..W {
+            let (mut t0, mut t1) = (tmin, tmax);
+            for a in 0..3 {
+                let lo = n.bounds[self.near_plane[a]][lane];
+                let hi = n.bounds[(self.near_plane[a] + 3) % 6][lane];
+                let tn = (lo - self.o[a]) * self.inv[a];
+                let tf = (hi - self.o[a]) * self.inv[a] * ROBUST_SCALE;
+                // As maxps/minps: a NaN distance leaves the bound as it is.
+                if tn > t0 {
+                    t0 = tn;
                 }
-                near[lane] = t0;
-                if t0 <= t1 {
-                    mask |= 1 << lane;
+                if tf < t1 {
+                    t1 = tf;
                 }
             }
-            mask
+            near[lane] = t0;
+            if t0 <= t1 {
+                mask |= 1 << lane;
+            }
         }
+        mask
     }
 }
 
@@ -862,15 +870,22 @@ fn intersect_group(g: &TriGroup, rt: &RayTransform, sh: &Shear, tmin: f32, tmax:
     #[cfg(not(target_arch = "x86_64"))]
     {
         let _ = sh;
-        let mut mask = 0;
-        for lane in 0..LANES {
-            if let Some((t, u, v)) = scalar_lane(g, lane, rt, tmin, tmax) {
-                out[lane] = LaneHit { t, u, v };
-                mask |= 1 << lane;
-            }
-        }
-        mask
+        intersect_group_scalar(g, rt, tmin, tmax, out)
     }
+}
+
+/// `intersect_group` one lane at a time with `intersect_triangle` itself,
+/// for targets without x86 SIMD (and the unit tests).
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+fn intersect_group_scalar(g: &TriGroup, rt: &RayTransform, tmin: f32, tmax: f32, out: &mut [LaneHit; LANES]) -> u32 {
+    let mut mask = 0;
+    for lane in 0..LANES {
+        if let Some((t, u, v)) = scalar_lane(g, lane, rt, tmin, tmax) {
+            out[lane] = LaneHit { t, u, v };
+            mask |= 1 << lane;
+        }
+    }
+    mask
 }
 
 #[inline]
@@ -970,6 +985,72 @@ mod tests {
             }
             assert_eq!(b.intersect(&rays[100]), want[100]);
         }
+    }
+
+    /// The SIMD kernels (SSE2 and AVX2 box tests, the SSE2 triangle group
+    /// test) give exactly the bits of the scalar code the other targets run.
+    #[test]
+    fn simd_kernels_equal_the_scalar_fallback() {
+        let shapes = shapes();
+        let bvh = WideBvh::<8>::build(&shapes);
+        let mut rays = rays(&shapes);
+        // Rays aimed at child-box corners, where entry and exit distances
+        // meet and the far plane's rounding allowance decides.
+        for node in bvh.nodes.iter().take(300) {
+            for lane in 0..8 {
+                if node.child[lane] == EMPTY {
+                    continue;
+                }
+                let lo = Vec3::new(node.bounds[0][lane], node.bounds[1][lane], node.bounds[2][lane]);
+                let hi = Vec3::new(node.bounds[3][lane], node.bounds[4][lane], node.bounds[5][lane]);
+                let o = hi + (hi - lo) * Vec3::new(1.3, 0.7, 2.1) + Vec3::splat(0.01);
+                rays.push(Ray::new(o, Vec3::new(hi.x, lo.y, hi.z) - o));
+                rays.push(Ray::new(o, hi - o));
+            }
+        }
+        let (mut boxes, mut groups) = (0, 0);
+        for (k, r) in rays.iter().enumerate().filter(|(_, r)| r.is_valid()) {
+            let slab = Slab::new(r);
+            let rt = RayTransform::new(r.origin, r.dir);
+            let shear = Shear::new(&rt);
+            let tmax = if k % 3 == 0 { r.tmax } else { 2.0 };
+            for node in bvh.nodes.iter().skip(k % 7).step_by(7) {
+                let mut want = [0.0f32; 8];
+                let m = slab.test_scalar(node, r.tmin, tmax, &mut want);
+                let mut got = [0.0f32; 8];
+                assert_eq!(slab.test::<8, false>(node, r.tmin, tmax, &mut got), m);
+                assert_eq!(got.map(f32::to_bits), want.map(f32::to_bits), "SSE2 entry distances");
+                #[cfg(target_arch = "x86_64")]
+                if is_x86_feature_detected!("avx2") {
+                    // SAFETY: checked just above.
+                    let (am, an) = unsafe { avx_box_test(&slab, node, r.tmin, tmax) };
+                    assert_eq!(am, m);
+                    assert_eq!(an.map(f32::to_bits), want.map(f32::to_bits), "AVX2 entry distances");
+                }
+                boxes += 1;
+            }
+            for g in bvh.groups.iter() {
+                let (mut a, mut b) = ([LaneHit::default(); LANES], [LaneHit::default(); LANES]);
+                let ma = intersect_group(g, &rt, &shear, r.tmin, tmax, &mut a);
+                let mb = intersect_group_scalar(g, &rt, r.tmin, tmax, &mut b);
+                assert_eq!(ma, mb);
+                for lane in 0..LANES {
+                    if ma & (1 << lane) != 0 {
+                        assert_eq!([a[lane].t, a[lane].u, a[lane].v].map(f32::to_bits), [b[lane].t, b[lane].u, b[lane].v].map(f32::to_bits));
+                        groups += 1;
+                    }
+                }
+            }
+        }
+        assert!(boxes > 100_000 && groups > 1_000, "too few cases: {boxes} box tests, {groups} group hits");
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn avx_box_test(slab: &Slab, node: &Node<8>, tmin: f32, tmax: f32) -> (u32, [f32; 8]) {
+        let mut near = [0.0f32; 8];
+        let m = slab.test::<8, true>(node, tmin, tmax, &mut near);
+        (m, near)
     }
 
     #[test]
