@@ -1,0 +1,253 @@
+//! The SIMD kernels: the slab test of a node's boxes (SSE2, AVX2, scalar)
+//! and the watertight test of a group of four triangles (SSE2, scalar). All
+//! paths perform the same per-lane operations in the same order.
+
+use super::{Node, TriGroup, LANES};
+use crate::accel::bvh::ROBUST_SCALE;
+use crate::geometry::{intersect_triangle, RayTransform};
+use crate::ray::Ray;
+use glam::Vec3;
+use std::ops::Div;
+
+/// Insertion sort of at most 8 entered children by entry distance, farthest
+/// first: pushed in that order, the nearest is visited next.
+#[inline(always)]
+pub(super) fn sort_far_first<T: Copy>(h: &mut [T], dist: impl Fn(&T) -> f32) {
+    for i in 1..h.len() {
+        let mut j = i;
+        while j > 0 && dist(&h[j - 1]) < dist(&h[j]) {
+            h.swap(j - 1, j);
+            j -= 1;
+        }
+    }
+}
+
+/// Per-ray slab-test constants:
+/// true reciprocals, near/far planes chosen by the direction's sign bit, and
+/// comparisons written so a NaN (origin on a plane, zero direction) is ignored.
+pub(super) struct Slab {
+    pub(super) o: [f32; 3],
+    pub(super) inv: [f32; 3],
+    /// Index into `Node::bounds` of the near plane per axis (min or max).
+    pub(super) near_plane: [usize; 3],
+}
+
+impl Slab {
+    pub(super) fn new(ray: &Ray) -> Self {
+        let d = ray.dir;
+        let neg = [d.x.is_sign_negative(), d.y.is_sign_negative(), d.z.is_sign_negative()];
+        Slab {
+            o: ray.origin.to_array(),
+            // One SIMD division; each lane is the exact scalar quotient.
+            inv: glam::Vec3A::ONE.div(glam::Vec3A::from(d)).to_array(),
+            near_plane: [if neg[0] { 3 } else { 0 }, if neg[1] { 4 } else { 1 }, if neg[2] { 5 } else { 2 }],
+        }
+    }
+
+    /// Bit i set when child i's box is entered in [tmin, tmax]; `near` gets
+    /// entry distances. Every path does the same per-lane operations: the
+    /// far distance enlarged by `ROBUST_SCALE`, and `max(tn, t0)` /
+    /// `min(tf, t1)` returning their second operand when the first is NaN.
+    #[inline(always)]
+    pub(super) fn test<const W: usize, const AVX: bool>(&self, n: &Node<W>, tmin: f32, tmax: f32, near: &mut [f32; W]) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        unsafe {
+            use std::arch::x86_64::*;
+            let rows = n.bounds.as_ptr() as *const f32;
+            if AVX && W == 8 {
+                // SAFETY: the caller runs with AVX2 enabled; rows are 32 bytes
+                // and the node is 64-byte aligned.
+                let mut t0 = _mm256_set1_ps(tmin);
+                let mut t1 = _mm256_set1_ps(tmax);
+                let scale = _mm256_set1_ps(ROBUST_SCALE);
+                for a in 0..3 {
+                    let o = _mm256_set1_ps(self.o[a]);
+                    let inv = _mm256_set1_ps(self.inv[a]);
+                    let lo = _mm256_load_ps(rows.add(self.near_plane[a] * W));
+                    let hi = _mm256_load_ps(rows.add((self.near_plane[a] + 3) % 6 * W));
+                    let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
+                    let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
+                    t0 = _mm256_max_ps(tn, t0);
+                    t1 = _mm256_min_ps(tf, t1);
+                }
+                _mm256_storeu_ps(near.as_mut_ptr(), t0);
+                return _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+            }
+            let mut mask = 0;
+            for c in (0..W).step_by(4) {
+                let mut t0 = _mm_set1_ps(tmin);
+                let mut t1 = _mm_set1_ps(tmax);
+                let scale = _mm_set1_ps(ROBUST_SCALE);
+                for a in 0..3 {
+                    let o = _mm_set1_ps(self.o[a]);
+                    let inv = _mm_set1_ps(self.inv[a]);
+                    let lo = _mm_load_ps(rows.add(self.near_plane[a] * W + c));
+                    let hi = _mm_load_ps(rows.add((self.near_plane[a] + 3) % 6 * W + c));
+                    let tn = _mm_mul_ps(_mm_sub_ps(lo, o), inv);
+                    let tf = _mm_mul_ps(_mm_mul_ps(_mm_sub_ps(hi, o), inv), scale);
+                    // maxps(a, b) = a > b ? a : b, so a NaN in tn leaves t0 as it is.
+                    t0 = _mm_max_ps(tn, t0);
+                    t1 = _mm_min_ps(tf, t1);
+                }
+                _mm_storeu_ps(near.as_mut_ptr().add(c), t0);
+                mask |= (_mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32) << c;
+            }
+            mask
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            self.test_scalar(n, tmin, tmax, near)
+        }
+    }
+
+    /// `test` one lane at a time, for targets without x86 SIMD (and the
+    /// unit tests, which check that every path gives the same bits).
+    #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+    pub(super) fn test_scalar<const W: usize>(&self, n: &Node<W>, tmin: f32, tmax: f32, near: &mut [f32; W]) -> u32 {
+        let mut mask = 0;
+        for lane in 0..W {
+            let (mut t0, mut t1) = (tmin, tmax);
+            for a in 0..3 {
+                let lo = n.bounds[self.near_plane[a]][lane];
+                let hi = n.bounds[(self.near_plane[a] + 3) % 6][lane];
+                let tn = (lo - self.o[a]) * self.inv[a];
+                let tf = (hi - self.o[a]) * self.inv[a] * ROBUST_SCALE;
+                // As maxps/minps: a NaN distance leaves the bound as it is.
+                if tn > t0 {
+                    t0 = tn;
+                }
+                if tf < t1 {
+                    t1 = tf;
+                }
+            }
+            near[lane] = t0;
+            if t0 <= t1 {
+                mask |= 1 << lane;
+            }
+        }
+        mask
+    }
+}
+
+/// The watertight test's per-ray shear, as axis indices and broadcastable constants.
+pub(super) struct Shear {
+    pub(super) k: [usize; 3],
+    pub(super) s: [f32; 3],
+    pub(super) o: [f32; 3],
+}
+
+impl Shear {
+    pub(super) fn new(rt: &RayTransform) -> Self {
+        let (k, s) = rt.shear();
+        Shear { k, s, o: rt.origin.to_array() }
+    }
+}
+
+#[derive(Clone, Copy, Default)]
+pub(super) struct LaneHit {
+    pub(super) t: f32,
+    pub(super) u: f32,
+    pub(super) v: f32,
+}
+
+/// The watertight test on four triangles at once; bit i set when lane i hits
+/// in (tmin, tmax]. Lane results equal `intersect_triangle` bit for bit; a
+/// lane with an edge function exactly 0 (which needs the f64 path) is
+/// handed to `intersect_triangle` itself.
+#[inline(always)]
+pub(super) fn intersect_group(g: &TriGroup, rt: &RayTransform, sh: &Shear, tmin: f32, tmax: f32, out: &mut [LaneHit; LANES]) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        use std::arch::x86_64::*;
+        let [kx, ky, kz] = sh.k;
+        let ld = |k: usize, a: usize| _mm_load_ps(g.v[k][a].as_ptr());
+        let (ox, oy, oz) = (_mm_set1_ps(sh.o[kx]), _mm_set1_ps(sh.o[ky]), _mm_set1_ps(sh.o[kz]));
+        let (sx, sy, sz) = (_mm_set1_ps(sh.s[0]), _mm_set1_ps(sh.s[1]), _mm_set1_ps(sh.s[2]));
+        // a = p - origin, per needed axis, then the shear.
+        let axk = _mm_sub_ps(ld(0, kx), ox);
+        let ayk = _mm_sub_ps(ld(0, ky), oy);
+        let azk = _mm_sub_ps(ld(0, kz), oz);
+        let bxk = _mm_sub_ps(ld(1, kx), ox);
+        let byk = _mm_sub_ps(ld(1, ky), oy);
+        let bzk = _mm_sub_ps(ld(1, kz), oz);
+        let cxk = _mm_sub_ps(ld(2, kx), ox);
+        let cyk = _mm_sub_ps(ld(2, ky), oy);
+        let czk = _mm_sub_ps(ld(2, kz), oz);
+        let ax = _mm_sub_ps(axk, _mm_mul_ps(sx, azk));
+        let ay = _mm_sub_ps(ayk, _mm_mul_ps(sy, azk));
+        let bx = _mm_sub_ps(bxk, _mm_mul_ps(sx, bzk));
+        let by = _mm_sub_ps(byk, _mm_mul_ps(sy, bzk));
+        let cx = _mm_sub_ps(cxk, _mm_mul_ps(sx, czk));
+        let cy = _mm_sub_ps(cyk, _mm_mul_ps(sy, czk));
+        // edge(p, q) = qx*py - qy*px, as in the scalar code.
+        let e0 = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
+        let e1 = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+        let e2 = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+        let zero = _mm_setzero_ps();
+        let any_zero = _mm_movemask_ps(_mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(e0, zero), _mm_cmpeq_ps(e1, zero)), _mm_cmpeq_ps(e2, zero))) as u32;
+        let neg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(e0, zero), _mm_cmplt_ps(e1, zero)), _mm_cmplt_ps(e2, zero));
+        let pos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(e0, zero), _mm_cmpgt_ps(e1, zero)), _mm_cmpgt_ps(e2, zero));
+        let det = _mm_add_ps(_mm_add_ps(e0, e1), e2);
+        // det finite: |det| < inf (false for NaN).
+        let abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fff_ffff));
+        let finite = _mm_cmplt_ps(_mm_and_ps(det, abs_mask), _mm_set1_ps(f32::INFINITY));
+        let mut ok = _mm_andnot_ps(_mm_and_ps(neg, pos), _mm_and_ps(finite, _mm_cmpneq_ps(det, zero)));
+        let az = _mm_mul_ps(sz, azk);
+        let bz = _mm_mul_ps(sz, bzk);
+        let cz = _mm_mul_ps(sz, czk);
+        let ts = _mm_add_ps(_mm_add_ps(_mm_mul_ps(e0, az), _mm_mul_ps(e1, bz)), _mm_mul_ps(e2, cz));
+        // Behind the origin: det and t_scaled of opposite signs (or t_scaled 0).
+        let behind = _mm_or_ps(_mm_and_ps(_mm_cmpgt_ps(det, zero), _mm_cmple_ps(ts, zero)), _mm_and_ps(_mm_cmplt_ps(det, zero), _mm_cmpge_ps(ts, zero)));
+        ok = _mm_andnot_ps(behind, ok);
+        let mut mask = _mm_movemask_ps(ok) as u32 & !any_zero;
+        if mask != 0 {
+            let inv = _mm_div_ps(_mm_set1_ps(1.0), det);
+            let t = _mm_mul_ps(ts, inv);
+            let in_range = _mm_and_ps(_mm_cmpgt_ps(t, _mm_set1_ps(tmin)), _mm_cmple_ps(t, _mm_set1_ps(tmax)));
+            mask &= _mm_movemask_ps(in_range) as u32;
+            let (mut tt, mut uu, mut vv) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+            _mm_storeu_ps(tt.as_mut_ptr(), t);
+            _mm_storeu_ps(uu.as_mut_ptr(), _mm_mul_ps(e1, inv));
+            _mm_storeu_ps(vv.as_mut_ptr(), _mm_mul_ps(e2, inv));
+            for lane in 0..LANES {
+                out[lane] = LaneHit { t: tt[lane], u: uu[lane], v: vv[lane] };
+            }
+        }
+        // Lanes with an exact zero edge function: the scalar test decides (in f64).
+        let mut z = any_zero;
+        while z != 0 {
+            let lane = z.trailing_zeros() as usize;
+            z &= z - 1;
+            if let Some((t, u, v)) = scalar_lane(g, lane, rt, tmin, tmax) {
+                out[lane] = LaneHit { t, u, v };
+                mask |= 1 << lane;
+            }
+        }
+        mask
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = sh;
+        intersect_group_scalar(g, rt, tmin, tmax, out)
+    }
+}
+
+/// `intersect_group` one lane at a time with `intersect_triangle` itself,
+/// for targets without x86 SIMD (and the unit tests).
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+pub(super) fn intersect_group_scalar(g: &TriGroup, rt: &RayTransform, tmin: f32, tmax: f32, out: &mut [LaneHit; LANES]) -> u32 {
+    let mut mask = 0;
+    for lane in 0..LANES {
+        if let Some((t, u, v)) = scalar_lane(g, lane, rt, tmin, tmax) {
+            out[lane] = LaneHit { t, u, v };
+            mask |= 1 << lane;
+        }
+    }
+    mask
+}
+
+#[inline]
+pub(super) fn scalar_lane(g: &TriGroup, lane: usize, rt: &RayTransform, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    let p = |k: usize| Vec3::new(g.v[k][0][lane], g.v[k][1][lane], g.v[k][2][lane]);
+    intersect_triangle(rt, p(0), p(1), p(2), tmin, tmax)
+}

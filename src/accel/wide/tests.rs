@@ -1,0 +1,182 @@
+//! Unit tests of the wide BVH: every width, instruction set and traversal
+//! mode against brute force, and the SIMD kernels against the scalar code.
+
+use super::kernels::intersect_group_scalar;
+use super::*;
+use glam::Vec3;
+use crate::accel::brute::BruteForce;
+use crate::bench::{camera_rays, procedural_scene, random_rays};
+use crate::camera::Camera;
+use crate::rng::Rng;
+
+/// A small mesh with a sphere inside it, so leaves hold both kinds.
+fn shapes() -> Vec<Shape> {
+    let mut shapes = procedural_scene(3000).shapes;
+    shapes.push(Shape::Sphere { center: Vec3::new(0.1, 0.0, 0.2), radius: 0.3 });
+    shapes
+}
+
+/// Packets of 16 nearly parallel rays from nearly the same point, so
+/// most pass `Frustum::new`; every fourth packet spreads wider.
+fn tight_packets(n: usize, seed: u64) -> Vec<Ray> {
+    let mut rng = Rng::new(seed, 1);
+    let mut rays = Vec::new();
+    for p in 0..n {
+        let spread = if p % 4 == 3 { 0.2 } else { 1e-3 };
+        let o = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 4.0 - 2.0;
+        let d = (Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0).normalize_or(Vec3::X);
+        for _ in 0..frustum::PACKET {
+            let jo = (Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5) * spread;
+            let jd = (Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5) * spread;
+            rays.push(Ray::new(o + jo, d + jd));
+        }
+    }
+    rays
+}
+
+fn rays(shapes: &[Shape]) -> Vec<Ray> {
+    let mut scene = procedural_scene(3000);
+    scene.shapes = shapes.to_vec();
+    let mut rays = camera_rays(&Camera::from_scene(&scene), 64, 48);
+    rays.extend(random_rays(&scene, 3000, 5));
+    rays.extend(tight_packets(200, 9));
+    // Short rays that end inside boxes, and rays that start inside them.
+    for (i, r) in rays.iter_mut().enumerate().skip(7).step_by(13) {
+        r.tmax = 0.5 + (i % 5) as f32;
+    }
+    // Invalid rays among valid ones, in packets and batches.
+    rays[10].dir = Vec3::ZERO;
+    rays[3100].origin.x = f32::NAN;
+    let last = rays.len() - 1;
+    rays[last].dir.y = f32::INFINITY;
+    rays
+}
+
+#[test]
+fn every_width_and_instruction_set_matches_brute_force() {
+    let shapes = shapes();
+    let rays = rays(&shapes);
+    let brute = BruteForce::new(&shapes);
+    let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
+    let want_occ: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
+    let mut sse8 = WideBvh::<8>::build(&shapes);
+    let avx8_on = sse8.avx;
+    sse8.avx = false;
+    // Interleaved batches are only switched on for large structures;
+    // force them here.
+    let mut interleaved = WideBvh::<8>::build(&shapes);
+    interleaved.interleave = interleaved.avx;
+    let candidates: Vec<(&str, Box<dyn Traversal>)> = vec![
+        ("4-wide", Box::new(WideBvh::<4>::build(&shapes))),
+        ("8-wide SSE2", Box::new(sse8)),
+        ("8-wide default", Box::new(WideBvh::<8>::build(&shapes))),
+        ("8-wide interleaved", Box::new(interleaved)),
+    ];
+    if !avx8_on {
+        eprintln!("note: this CPU has no AVX2; the AVX2 paths were not exercised");
+    }
+    for (name, b) in &candidates {
+        let mut hits = vec![None; rays.len()];
+        let mut occ = vec![false; rays.len()];
+        for (what, f) in [("batch", false), ("coherent", true)] {
+            if f {
+                b.intersect_coherent(&rays, &mut hits);
+                b.occluded_coherent(&rays, &mut occ);
+            } else {
+                b.intersect_batch(&rays, &mut hits);
+                b.occluded_batch(&rays, &mut occ);
+            }
+            let bad = hits.iter().zip(&want).filter(|(a, b)| a != b).count();
+            let bad_occ = occ.iter().zip(&want_occ).filter(|(a, b)| a != b).count();
+            assert_eq!((bad, bad_occ), (0, 0), "{name} {what}: closest-hit and occlusion mismatches against brute force");
+        }
+        assert_eq!(b.intersect(&rays[100]), want[100]);
+    }
+}
+
+/// The SIMD kernels (SSE2 and AVX2 box tests, the SSE2 triangle group
+/// test) give exactly the bits of the scalar code the other targets run.
+#[test]
+fn simd_kernels_equal_the_scalar_fallback() {
+    let shapes = shapes();
+    let bvh = WideBvh::<8>::build(&shapes);
+    let mut rays = rays(&shapes);
+    // Rays aimed at child-box corners, where entry and exit distances
+    // meet and the far plane's rounding allowance decides.
+    for node in bvh.nodes.iter().take(300) {
+        for lane in 0..8 {
+            if node.child[lane] == EMPTY {
+                continue;
+            }
+            let lo = Vec3::new(node.bounds[0][lane], node.bounds[1][lane], node.bounds[2][lane]);
+            let hi = Vec3::new(node.bounds[3][lane], node.bounds[4][lane], node.bounds[5][lane]);
+            let o = hi + (hi - lo) * Vec3::new(1.3, 0.7, 2.1) + Vec3::splat(0.01);
+            rays.push(Ray::new(o, Vec3::new(hi.x, lo.y, hi.z) - o));
+            rays.push(Ray::new(o, hi - o));
+        }
+    }
+    let (mut boxes, mut groups) = (0, 0);
+    for (k, r) in rays.iter().enumerate().filter(|(_, r)| r.is_valid()) {
+        let slab = Slab::new(r);
+        let rt = RayTransform::new(r.origin, r.dir);
+        let shear = Shear::new(&rt);
+        let tmax = if k % 3 == 0 { r.tmax } else { 2.0 };
+        for node in bvh.nodes.iter().skip(k % 7).step_by(7) {
+            let mut want = [0.0f32; 8];
+            let m = slab.test_scalar(node, r.tmin, tmax, &mut want);
+            let mut got = [0.0f32; 8];
+            assert_eq!(slab.test::<8, false>(node, r.tmin, tmax, &mut got), m);
+            assert_eq!(got.map(f32::to_bits), want.map(f32::to_bits), "SSE2 entry distances");
+            #[cfg(target_arch = "x86_64")]
+            if is_x86_feature_detected!("avx2") {
+                // SAFETY: checked just above.
+                let (am, an) = unsafe { avx_box_test(&slab, node, r.tmin, tmax) };
+                assert_eq!(am, m);
+                assert_eq!(an.map(f32::to_bits), want.map(f32::to_bits), "AVX2 entry distances");
+            }
+            boxes += 1;
+        }
+        for g in bvh.groups.iter() {
+            let (mut a, mut b) = ([LaneHit::default(); LANES], [LaneHit::default(); LANES]);
+            let ma = intersect_group(g, &rt, &shear, r.tmin, tmax, &mut a);
+            let mb = intersect_group_scalar(g, &rt, r.tmin, tmax, &mut b);
+            assert_eq!(ma, mb);
+            for lane in 0..LANES {
+                if ma & (1 << lane) != 0 {
+                    assert_eq!([a[lane].t, a[lane].u, a[lane].v].map(f32::to_bits), [b[lane].t, b[lane].u, b[lane].v].map(f32::to_bits));
+                    groups += 1;
+                }
+            }
+        }
+    }
+    assert!(boxes > 100_000 && groups > 1_000, "too few cases: {boxes} box tests, {groups} group hits");
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn avx_box_test(slab: &Slab, node: &Node<8>, tmin: f32, tmax: f32) -> (u32, [f32; 8]) {
+    let mut near = [0.0f32; 8];
+    let m = slab.test::<8, true>(node, tmin, tmax, &mut near);
+    (m, near)
+}
+
+#[test]
+fn frustum_accepts_coherent_packets() {
+    let rays = tight_packets(100, 4);
+    let accepted = rays.chunks(frustum::PACKET).filter(|p| frustum::Frustum::new(p, false).is_some()).count();
+    // The tight three quarters all share signs unless a direction
+    // component is within 1e-3 of zero.
+    assert!(accepted >= 70, "only {accepted} of 100 packets traced as frusta");
+    let mut mixed = rays[..16].to_vec();
+    mixed[3].dir.x = -mixed[0].dir.x;
+    assert!(frustum::Frustum::new(&mixed, false).is_none(), "mixed direction signs must fall back to single rays");
+    mixed[3] = Ray::new(mixed[0].origin, Vec3::new(0.0, 1.0, 1.0));
+    assert!(frustum::Frustum::new(&mixed, false).is_none(), "a zero direction component must fall back");
+    // A fanned-out packet (shadow rays near their light) is traced as a
+    // frustum only when the caller does not limit the spread.
+    let o = Vec3::new(0.5, 0.5, 0.5);
+    let fan: Vec<Ray> = (0..16).map(|i| Ray::new(o, Vec3::new(1.0, 0.3 + 0.05 * i as f32, 0.5))).collect();
+    assert!(frustum::Frustum::new(&fan, false).is_some());
+    assert!(frustum::Frustum::new(&fan, true).is_none(), "a packet fanned out over 0.75 rad must be traced ray by ray");
+    assert!(frustum::Frustum::new(&fan[..2], true).is_some(), "two rays 0.05 apart stay a frustum");
+}
