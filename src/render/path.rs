@@ -20,13 +20,11 @@
 
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
-use crate::light::{emitted, Light, Lights, Target};
+use crate::light::{emitted, Lights};
 use crate::ray::Ray;
 use crate::rng::Rng;
-use crate::sampling::{cosine_hemisphere, cosine_hemisphere_pdf, uniform_hemisphere, Frame, UNIFORM_HEMISPHERE_PDF};
 use crate::scene::{Bsdf, Interaction, Scene};
 use glam::Vec3;
-use std::f32::consts::PI;
 
 pub struct PathTracer<'a> {
     pub scene: &'a Scene,
@@ -73,38 +71,6 @@ impl PathTracer<'_> {
         Vertex { it, ng, ns, albedo }
     }
 
-    fn unoccluded(&self, v: &Vertex, wi: Vec3, target: Target, rays: &mut u64) -> bool {
-        *rays += 1;
-        let ray = match target {
-            Target::Point(q) => v.it.spawn_ray_to(q),
-            Target::Infinite => v.it.spawn_ray(wi),
-        };
-        !self.accel.occluded(&ray)
-    }
-
-    /// Light sampling for one light: `n` samples averaged, each weighted
-    /// against the BSDF sample by the power heuristic (delta lights and
-    /// lights no ray can hit have weight 1: only light sampling finds them).
-    fn sample_light(&self, v: &Vertex, light: &Light, n: u32, rng: &mut Rng, rays: &mut u64) -> Vec3 {
-        let f = v.albedo / PI;
-        let mis = !self.hemisphere && light.is_visible();
-        let mut sum = Vec3::ZERO;
-        for _ in 0..n {
-            let u = rng.uniform2();
-            let u_sel = rng.uniform();
-            let Some(s) = light.sample(self.scene, v.it.p, u, u_sel) else { continue };
-            let cos = s.wi.dot(v.ns);
-            if cos <= 0.0 || s.wi.dot(v.ng) <= 0.0 || s.pdf <= 0.0 {
-                continue;
-            }
-            if self.unoccluded(v, s.wi, s.target, rays) {
-                let w = if mis { power_heuristic(n as f32 * s.pdf, cosine_hemisphere_pdf(cos)) } else { 1.0 };
-                sum += f * s.value * cos / s.pdf * w;
-            }
-        }
-        sum / n as f32
-    }
-
     /// MIS weight of the BSDF sample `wi` (pdf `pdf_b`) that reached the
     /// emitter surface at `hit`, seen from `v`.
     pub(super) fn bsdf_weight_hit(&self, v: &Vertex, hit: &Interaction, pdf_b: f32) -> f32 {
@@ -123,45 +89,15 @@ impl PathTracer<'_> {
         power_heuristic(pdf_b, self.light_samples as f32 * pl)
     }
 
-    /// Direct light reflected at `v` towards the previous vertex.
+    /// Direct light reflected at `v` towards the previous vertex: the
+    /// wavefront's terms (`direct_terms`), their rays traced one by one.
     fn direct(&self, v: &Vertex, rng: &mut Rng, rays: &mut u64) -> Vec3 {
-        if v.albedo == Vec3::ZERO {
-            return Vec3::ZERO;
-        }
-        let mut total = Vec3::ZERO;
-        if !self.hemisphere {
-            for light in &self.lights.lights {
-                let n = if light.is_delta() { 1 } else { self.light_samples };
-                total += self.sample_light(v, light, n, rng, rays);
-            }
-            return total;
-        }
-        // Lights no ray can hit are sampled explicitly even with -H.
-        for light in self.lights.lights.iter().filter(|l| !l.is_visible()) {
-            let n = if light.is_delta() { 1 } else { self.light_samples };
-            total += self.sample_light(v, light, n, rng, rays);
-        }
-        // CS184: lights x samples-per-light uniform directions about the normal.
-        let visible = self.lights.lights.iter().filter(|l| l.is_visible()).count() as u32;
-        let n = visible.max(1) * self.light_samples;
-        let frame = Frame::new(v.ns);
-        let f = v.albedo / PI;
-        let mut sum = Vec3::ZERO;
-        for _ in 0..n {
-            let (u1, u2) = rng.uniform2();
-            let wi = frame.to_world(uniform_hemisphere(u1, u2));
-            if wi.dot(v.ng) <= 0.0 {
-                continue;
-            }
-            let cos = wi.dot(v.ns);
-            let ray = v.it.spawn_ray(wi);
-            let le = match self.trace(&ray, rays) {
-                Some(hit) => emitted(self.scene, &hit, -wi),
-                None => self.lights.escaped(wi),
-            };
-            sum += f * le * cos / UNIFORM_HEMISPHERE_PDF;
-        }
-        total + sum / n as f32
+        let (mut terms, mut shadow, mut closest) = (Vec::new(), Vec::new(), Vec::new());
+        self.direct_terms(v, rng, &mut terms, &mut shadow, &mut closest);
+        *rays += (shadow.len() + closest.len()) as u64;
+        let occluded: Vec<bool> = shadow.iter().map(|r| self.accel.occluded(r)).collect();
+        let found: Vec<Option<Hit>> = closest.iter().map(|r| self.accel.intersect(r)).collect();
+        self.replay(&terms, &occluded, &closest, &found)
     }
 }
 
@@ -193,32 +129,10 @@ impl Integrator for PathTracer<'_> {
             if count {
                 l += beta * self.direct(&v, rng, rays);
             }
-            let last = bounce == m;
             // With MIS the last vertex still needs its BSDF sample: the light
             // it finds is part of this bounce's direct light.
-            if v.albedo == Vec3::ZERO || (last && (self.hemisphere || !count)) {
-                break;
-            }
-            // Diffuse BSDF, cosine-weighted: f cos / pdf = albedo.
-            let (u1, u2) = rng.uniform2();
-            let wi = Frame::new(v.ns).to_world(cosine_hemisphere(u1, u2));
-            let pdf_b = cosine_hemisphere_pdf(wi.dot(v.ns));
-            if wi.dot(v.ng) <= 0.0 || pdf_b <= 0.0 {
-                break; // below the geometric surface: no light goes that way
-            }
-            let mut beta_next = beta * v.albedo;
-            // Russian roulette, from the second indirect bounce on (CS184 always
-            // traces one). Continuing with probability max(beta) keeps the
-            // weights of surviving paths near 1, so dark paths, which would add
-            // little, are the ones cut, and no path's weight can blow up as it
-            // can with a constant probability.
-            if self.russian_roulette && bounce >= 2 && !last {
-                let q = beta_next.max_element().min(1.0);
-                if q <= 0.0 || rng.uniform() >= q {
-                    break;
-                }
-                beta_next /= q;
-            }
+            let Some((wi, pdf_b, beta_next)) = self.continuation(&v, bounce, count, beta, rng) else { break };
+            let last = bounce == m;
             let ray = v.it.spawn_ray(wi);
             let gather = count && !self.hemisphere;
             let Some(next) = self.trace(&ray, rays) else {

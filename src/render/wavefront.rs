@@ -3,11 +3,13 @@
 //! are drawn first, then all shadow rays are traced as one batch and all
 //! other rays as another, then every path adds what its rays found.
 //!
-//! Each path draws from its own random stream in exactly the order
-//! `PathTracer::radiance_from` does (visibility never changes what is drawn
-//! next), and the deferred sums are replayed in the same order, so the
-//! radiance of every path is bit-identical to the one-path-at-a-time loop:
-//! batching changes which rays travel together, never the image.
+//! `PathTracer::radiance_from` (one path at a time) is built from the same
+//! pieces (`direct_terms`, `replay`, `continuation`), tracing each ray as it
+//! is drawn. Each path draws from its own random stream in the same order
+//! either way (visibility never changes what is drawn next), and the
+//! deferred sums are replayed in the same order, so every path's radiance
+//! is bit-identical: batching changes which rays travel together, never the
+//! image.
 
 use super::path::{PathTracer, Vertex};
 use crate::accel::Hit;
@@ -21,7 +23,7 @@ use std::f32::consts::PI;
 
 /// One term of a vertex's direct-light estimate, in the order the
 /// path-at-a-time code adds them.
-enum Term {
+pub(super) enum Term {
     /// A light sample's contribution, counted if shadow ray `ray` is unoccluded.
     Shadow { ray: usize, value: Vec3 },
     /// A `-H` hemisphere sample: `f * le * cos / pdf` with `le` what ray
@@ -140,9 +142,14 @@ impl PathTracer<'_> {
         }
     }
 
-    /// `PathTracer::direct` with its rays deferred: the same draws, the
-    /// terms recorded instead of summed.
-    fn direct_terms(&self, v: &Vertex, rng: &mut Rng, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) {
+    /// The direct light at `v`, drawn but not yet traced: the terms in the
+    /// order they are summed, shadow rays appended to `shadow`, `-H`
+    /// hemisphere rays to `closest`. Light sampling weighs each sample
+    /// against the BSDF sample by the power heuristic (delta lights and
+    /// lights no ray can hit have weight 1: only light sampling finds them);
+    /// `-H` adds CS184's uniform hemisphere samples for the lights a ray
+    /// can hit.
+    pub(super) fn direct_terms(&self, v: &Vertex, rng: &mut Rng, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) {
         if v.albedo == Vec3::ZERO {
             return;
         }
@@ -188,7 +195,7 @@ impl PathTracer<'_> {
     }
 
     /// The direct light of recorded `terms`, summed as `PathTracer::direct` sums.
-    fn replay(&self, terms: &[Term], occluded: &[bool], closest: &[Ray], found: &[Option<Hit>]) -> Vec3 {
+    pub(super) fn replay(&self, terms: &[Term], occluded: &[bool], closest: &[Ray], found: &[Option<Hit>]) -> Vec3 {
         let (mut total, mut sum) = (Vec3::ZERO, Vec3::ZERO);
         for t in terms {
             match *t {
@@ -213,10 +220,14 @@ impl PathTracer<'_> {
         total
     }
 
-    /// The path-at-a-time loop's decision after a vertex's direct light:
-    /// `None` when the path ends, else the BSDF-sampled direction, its pdf
-    /// and the throughput past it (after Russian roulette).
-    fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, rng: &mut Rng) -> Option<(Vec3, f32, Vec3)> {
+    /// What follows a vertex's direct light: `None` when the path ends,
+    /// else the BSDF-sampled direction, its pdf and the throughput past it
+    /// (after Russian roulette, from the second indirect bounce on: CS184
+    /// always traces one. Continuing with probability max(beta) keeps the
+    /// weights of surviving paths near 1, so dark paths, which would add
+    /// little, are the ones cut, and no weight can blow up as it can with a
+    /// constant probability).
+    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, rng: &mut Rng) -> Option<(Vec3, f32, Vec3)> {
         let last = bounce == self.max_depth;
         if v.albedo == Vec3::ZERO || (last && (self.hemisphere || !count)) {
             return None;

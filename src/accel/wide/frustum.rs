@@ -253,20 +253,7 @@ impl<const W: usize> WideBvh<W> {
             }
             let inner = mask & !leaves;
             if inner != 0 {
-                let base = sp;
-                let mut m = inner;
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    let code = node.child[lane];
-                    self.prefetch(code);
-                    stack[sp].write((code, near[lane]));
-                    sp += 1;
-                }
-                if !ANY {
-                    let pushed = std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32), sp - base);
-                    super::sort_far_first(pushed, |e| e.1);
-                }
+                sp = self.push_children(node, inner, &near, &mut stack, sp, !ANY);
             }
             // Pop the nearest child that may still hold a closer hit (the
             // leaves just tested may have shortened the rays).

@@ -123,20 +123,8 @@ impl<const W: usize> WideBvh<W> {
                     w.cur = node.child[mask.trailing_zeros() as usize];
                     return false;
                 }
-                let base = w.sp;
-                let mut m = mask;
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    let code = node.child[lane];
-                    self.prefetch(code);
-                    w.stack[w.sp].write((code, near[lane]));
-                    w.sp += 1;
-                }
-                let pushed = std::slice::from_raw_parts_mut(w.stack[base..w.sp].as_mut_ptr() as *mut (u32, f32), w.sp - base);
-                super::sort_far_first(pushed, |e| e.1);
-                w.sp -= 1;
-                w.cur = pushed[pushed.len() - 1].0;
+                w.sp = self.push_children(node, mask, &near, &mut w.stack, w.sp, true) - 1;
+                w.cur = w.stack[w.sp].assume_init().0;
                 return false;
             }
         }

@@ -29,6 +29,7 @@ use super::{Hit, Traversal};
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use crate::scene::Shape;
+use std::mem::MaybeUninit;
 
 /// Triangles per group, and rays per packet: one SSE register.
 const LANES: usize = 4;
@@ -235,7 +236,7 @@ impl<const W: usize> WideBvh<W> {
         let mut tmax = ray.tmax;
         // Stack of (child code, entry distance), not initialised: only
         // entries below `sp` are read.
-        let mut stack = [std::mem::MaybeUninit::<(u32, f32)>::uninit(); STACK];
+        let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
         let mut sp = 0;
         let mut cur = self.root;
         loop {
@@ -260,23 +261,12 @@ impl<const W: usize> WideBvh<W> {
                         cur = node.child[first];
                         continue;
                     }
-                    // Push every entered child, sort them far to near, and
-                    // continue with the nearest.
-                    let base = sp;
-                    let mut m = mask;
-                    while m != 0 {
-                        let lane = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        let code = node.child[lane];
-                        self.prefetch(code);
-                        stack[sp].write((code, near[lane]));
-                        sp += 1;
-                    }
-                    // SAFETY: entries base..sp were written just above.
-                    let pushed = unsafe { std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32), sp - base) };
-                    if !ANY { sort_far_first(pushed, |e| e.1); }
+                    // Push every entered child (far to near unless any hit
+                    // will do), and continue with the top one.
+                    sp = self.push_children(node, mask, &near, &mut stack, sp, !ANY);
                     sp -= 1;
-                    cur = pushed[pushed.len() - 1].0;
+                    // SAFETY: push_children wrote the entry at the old top.
+                    cur = unsafe { stack[sp].assume_init() }.0;
                     continue;
                 }
             }
@@ -316,6 +306,29 @@ impl<const W: usize> WideBvh<W> {
                 off += 64;
             }
         }
+    }
+
+    /// Push the children of `node` in `mask` with their entry distances,
+    /// starting their fetches; with `sort`, ordered so the nearest is on
+    /// top. Returns the new stack height.
+    #[inline(always)]
+    fn push_children(&self, node: &Node<W>, mask: u32, near: &[f32; W], stack: &mut [MaybeUninit<(u32, f32)>; STACK], mut sp: usize, sort: bool) -> usize {
+        let base = sp;
+        let mut m = mask;
+        while m != 0 {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let code = node.child[lane];
+            self.prefetch(code);
+            stack[sp].write((code, near[lane]));
+            sp += 1;
+        }
+        if sort {
+            // SAFETY: entries base..sp were written just above.
+            let pushed = unsafe { std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32), sp - base) };
+            sort_far_first(pushed, |e| e.1);
+        }
+        sp
     }
 
     #[inline(always)]
