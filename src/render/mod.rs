@@ -18,6 +18,8 @@ use std::io::IsTerminal;
 use std::time::Instant;
 
 const TILE: u32 = 32;
+/// Side of the pixel blocks a tile is sampled in (see `render`).
+const BLOCK: u32 = 4;
 
 /// Radiance along a camera ray. The image loop finds the camera rays' first
 /// hits itself, a tile of rays per call to the backend's coherent batch
@@ -276,10 +278,18 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
         .map(|&(tx, ty)| {
             let mut local = Vec::with_capacity((TILE * TILE) as usize);
             let mut frame = Vec::with_capacity((TILE * TILE) as usize);
-            for ly in ty..(ty + TILE).min(region.h) {
-                for lx in tx..(tx + TILE).min(region.w) {
-                    local.push((lx, ly));
-                    frame.push((region.x + lx, region.y + region.h - 1 - ly));
+            // Pixels in 4x4 blocks, so the backends' 16-ray packets of
+            // camera rays are square frusta rather than 16x1 strips. Each
+            // pixel has its own random stream: the order changes no pixel.
+            let (x_end, y_end) = ((tx + TILE).min(region.w), (ty + TILE).min(region.h));
+            for by in (ty..y_end).step_by(BLOCK as usize) {
+                for bx in (tx..x_end).step_by(BLOCK as usize) {
+                    for ly in by..(by + BLOCK).min(y_end) {
+                        for lx in bx..(bx + BLOCK).min(x_end) {
+                            local.push((lx, ly));
+                            frame.push((region.x + lx, region.y + region.h - 1 - ly));
+                        }
+                    }
                 }
             }
             let (results, rays) = render_tile(camera, integ, settings, &frame);
