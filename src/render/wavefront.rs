@@ -39,8 +39,9 @@ struct Path {
     beta: Vec3,
     v: Option<Vertex>,
     bounce: u32,
-    /// Direct-light terms of the current vertex (when this bounce counts).
-    terms: Vec<Term>,
+    /// Direct-light terms of the current vertex (when this bounce counts):
+    /// a range of the bounce's shared term buffer.
+    terms: std::ops::Range<usize>,
     counted: bool,
     /// The continuation: its ray (index in the closest-hit batch), sampled
     /// direction, pdf and throughput, or `None` when the path ends here.
@@ -58,7 +59,7 @@ impl PathTracer<'_> {
             .zip(hits)
             .map(|(ray, hit)| {
                 let wo = -ray.dir.normalize();
-                let mut p = Path { l: Vec3::ZERO, beta: Vec3::ONE, v: None, bounce: 1, terms: Vec::new(), counted: false, next: None };
+                let mut p = Path { l: Vec3::ZERO, beta: Vec3::ONE, v: None, bounce: 1, terms: 0..0, counted: false, next: None };
                 match hit.map(|h| Interaction::new(self.scene, ray, &h)) {
                     None => {
                         if counts(0) {
@@ -79,20 +80,23 @@ impl PathTracer<'_> {
             .collect();
         let (mut shadow, mut closest): (Vec<Ray>, Vec<Ray>) = (Vec::new(), Vec::new());
         let (mut occluded, mut found): (Vec<bool>, Vec<Option<Hit>>) = (Vec::new(), Vec::new());
+        let mut terms: Vec<Term> = Vec::new();
         loop {
             shadow.clear();
             closest.clear();
+            terms.clear();
             let mut live = false;
             // Draw: direct-light samples, then the continuation, per path.
             for (i, p) in paths.iter_mut().enumerate() {
                 let Some(v) = &p.v else { continue };
                 live = true;
                 let rng = &mut *rngs[i];
-                p.terms.clear();
+                let first = terms.len();
                 p.counted = counts(p.bounce);
                 if p.counted {
-                    self.direct_terms(v, rng, &mut p.terms, &mut shadow, &mut closest);
+                    self.direct_terms(v, rng, &mut terms, &mut shadow, &mut closest);
                 }
+                p.terms = first..terms.len();
                 p.next = self.continuation(v, p.bounce, p.counted, p.beta, rng).map(|(wi, pdf_b, beta_next)| {
                     closest.push(v.it.spawn_ray(wi));
                     (closest.len() - 1, wi, pdf_b, beta_next)
@@ -113,7 +117,7 @@ impl PathTracer<'_> {
             for p in paths.iter_mut() {
                 let Some(v) = p.v.take() else { continue };
                 if p.counted {
-                    p.l += p.beta * self.replay(&p.terms, &occluded, &closest, &found);
+                    p.l += p.beta * self.replay(&terms[p.terms.clone()], &occluded, &closest, &found);
                 }
                 let Some((k, wi, pdf_b, beta_next)) = p.next else { continue };
                 let gather = p.counted && !self.hemisphere;
