@@ -1,8 +1,8 @@
-//! Coherent rays (camera rays, shadow rays towards one light) traced 16 at a time through the
-//! 8-wide tree: interior nodes are tested once per packet against the
-//! packet's *interval* ray (the box of its origins and of its reciprocal
-//! directions), and only nodes with leaf children test the rays one by one
-//! before their leaves are intersected ray by ray.
+//! Coherent rays (camera rays, shadow rays towards one light) traced 16 at
+//! a time through the 8-wide tree: interior nodes are tested once per
+//! packet against the packet's *interval* ray (the box of its origins and
+//! of its reciprocal directions), and only nodes with leaf children test
+//! the rays one by one before their leaves are intersected ray by ray.
 //!
 //! Answers equal single-ray traversal bit for bit: the interval test is
 //! conservative (it enters every box any ray of the packet enters, see
@@ -236,8 +236,11 @@ impl<const W: usize> WideBvh<W> {
                             false
                         });
                         if ANY && found {
+                            // The ray leaves the packet: nothing it could
+                            // still enter bounds the packet's range.
                             occluded[i] = true;
                             active &= !(1u64 << i);
+                            tmax[i] = f32::NEG_INFINITY;
                             break;
                         }
                     }
@@ -245,11 +248,7 @@ impl<const W: usize> WideBvh<W> {
                 if active == 0 {
                     return;
                 }
-                far = if ANY {
-                    (0..n).filter(|&i| active & (1u64 << i) != 0).map(|i| tmax[i]).fold(f32::NEG_INFINITY, f32::max)
-                } else {
-                    tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t))
-                };
+                far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
             }
             let inner = mask & !leaves;
             if inner != 0 {
@@ -257,16 +256,9 @@ impl<const W: usize> WideBvh<W> {
             }
             // Pop the nearest child that may still hold a closer hit (the
             // leaves just tested may have shortened the rays).
-            loop {
-                if sp == 0 {
-                    return;
-                }
-                sp -= 1;
-                let (code, dist) = stack[sp].assume_init();
-                if dist <= far {
-                    cur = code;
-                    break;
-                }
+            match super::pop_within(&stack, &mut sp, far) {
+                Some(code) => cur = code,
+                None => return,
             }
         }
     }

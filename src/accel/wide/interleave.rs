@@ -128,16 +128,12 @@ impl<const W: usize> WideBvh<W> {
                 return false;
             }
         }
-        loop {
-            if w.sp == 0 {
-                return true;
-            }
-            w.sp -= 1;
-            let (code, dist) = w.stack[w.sp].assume_init();
-            if dist <= w.tmax {
+        match super::pop_within(&w.stack, &mut w.sp, w.tmax) {
+            Some(code) => {
                 w.cur = code;
-                return false;
+                false
             }
+            None => true,
         }
     }
 }

@@ -31,7 +31,7 @@ use crate::ray::Ray;
 use crate::scene::Shape;
 use std::mem::MaybeUninit;
 
-/// Triangles per group, and rays per packet: one SSE register.
+/// Triangles per group: one SSE register.
 const LANES: usize = 4;
 /// The width the native backend uses. Measured with `pathtracer bench` (1
 /// thread, Mrays/s, camera/shadow/random): cow 4-wide 31.4/9.2/8.6, 8-wide
@@ -119,7 +119,6 @@ struct SahCost {
 /// (13 MB) -4 %, CBbunny (1.7 MB) -32 %: below this size the walkers' extra
 /// state costs more than the overlapped misses save.
 const INTERLEAVE_BYTES: usize = 16 << 20;
-
 
 /// Whether this CPU runs the AVX2 box test (and the caller did not ask for SSE2).
 fn avx_available() -> bool {
@@ -271,17 +270,9 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             // Pop, skipping subtrees that start beyond the current closest hit.
-            loop {
-                if sp == 0 {
-                    return;
-                }
-                sp -= 1;
-                // SAFETY: every entry below the old `sp` was written.
-                let (code, dist) = unsafe { stack[sp].assume_init() };
-                if dist <= tmax {
-                    cur = code;
-                    break;
-                }
+            match pop_within(&stack, &mut sp, tmax) {
+                Some(code) => cur = code,
+                None => return,
             }
         }
     }
@@ -383,6 +374,22 @@ impl<const W: usize> WideBvh<W> {
     }
 }
 
+/// Pop stacked children until one whose entry distance is within `tmax`
+/// (a subtree starting beyond it cannot hold a closer hit); `None` when the
+/// stack runs out.
+#[inline(always)]
+fn pop_within(stack: &[MaybeUninit<(u32, f32)>; STACK], sp: &mut usize, tmax: f32) -> Option<u32> {
+    while *sp > 0 {
+        *sp -= 1;
+        // SAFETY: every entry below the stack height was written.
+        let (code, dist) = unsafe { stack[*sp].assume_init() };
+        if dist <= tmax {
+            return Some(code);
+        }
+    }
+    None
+}
+
 impl<const W: usize> Traversal for WideBvh<W> {
     fn name(&self) -> &'static str {
         "native"
@@ -416,6 +423,8 @@ impl<const W: usize> Traversal for WideBvh<W> {
     }
 
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        // Not through `intersect_batch`: one ray gains nothing from the
+        // interleaved walkers and would pay for setting them up.
         let mut hit = [None];
         #[cfg(target_arch = "x86_64")]
         if self.avx {
