@@ -55,23 +55,34 @@ const BIN_CHUNK: usize = 1 << 14;
 const MAX_SAH_DEPTH: usize = 64;
 
 /// Build-time primitive reference: the primitive's box as two SIMD vectors,
-/// the primitive's index in the `w` lane of `lo` (as Embree's `PrimRef`
-/// does), 32 bytes. Centroids are kept doubled (`lo + hi`), which bins the
+/// 32 bytes, the primitive's index carried in the `w` lanes (as Embree's
+/// `PrimRef` does). Centroids are kept doubled (`lo + hi`), which bins the
 /// same way and saves a multiply.
+///
+/// The index is split over both `w` lanes, 23 bits each, under the exponent
+/// of 1.0, so each lane is a normal float in [1, 2). Stored as raw bits, a
+/// small index is a denormal, and every SIMD add, multiply and min/max the
+/// build does on whole vectors then takes the CPU's slow path for denormal
+/// operands: binning cost 25 cycles per primitive instead of about 8, and
+/// the whole 1M-triangle build ran at a third of its speed.
 #[derive(Clone, Copy)]
 struct PrimRef {
     lo: Vec4,
     hi: Vec4,
 }
 
+const ONE_BITS: u32 = 0x3f80_0000;
+const MANTISSA: u32 = 0x007f_ffff;
+
 impl PrimRef {
     fn new(b: &Aabb, index: u32) -> PrimRef {
-        PrimRef { lo: b.min.extend(f32::from_bits(index)), hi: b.max.extend(0.0) }
+        let lane = |bits: u32| f32::from_bits(ONE_BITS | (bits & MANTISSA));
+        PrimRef { lo: b.min.extend(lane(index)), hi: b.max.extend(lane(index >> 23)) }
     }
 
     #[inline]
     fn index(&self) -> u32 {
-        self.lo.w.to_bits()
+        (self.lo.w.to_bits() & MANTISSA) | (self.hi.w.to_bits() & MANTISSA) << 23
     }
 
     #[inline]
@@ -397,5 +408,23 @@ fn partition<F: Fn(&PrimRef) -> bool>(v: &mut [PrimRef], pred: F) -> (usize, (Bo
         // v[i] belongs right and v[j-1] left: swap, and the scans above
         // take them on the next round.
         v.swap(i, j - 1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Indices survive the split encoding up to the largest `u32`, and the
+    /// `w` lanes holding them are normal floats (no denormal slow path).
+    #[test]
+    fn prim_ref_index_round_trips_in_normal_lanes() {
+        let b = Aabb { min: glam::Vec3::splat(-1.0), max: glam::Vec3::ONE };
+        for i in [0u32, 1, 7, (1 << 23) - 1, 1 << 23, (1 << 23) + 5, 123_456_789, 1 << 31, u32::MAX] {
+            let r = PrimRef::new(&b, i);
+            assert_eq!(r.index(), i);
+            assert!(r.lo.w.is_normal() && r.hi.w.is_normal(), "index {i}: w lanes {} {}", r.lo.w, r.hi.w);
+            assert!(r.centroid2().w.is_normal());
+        }
     }
 }
