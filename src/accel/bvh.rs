@@ -1,5 +1,5 @@
-//! The native backend's build: a binary BVH by binned SAH (parallel with
-//! rayon on large subtrees), which `wide` collapses into its W-wide layout.
+//! The native backend's build: binned SAH splits of primitive sets, which
+//! `wide` applies to build its W-wide tree directly.
 //!
 //! Box tests (in `wide`) follow Ize (2013): the far slab distance is enlarged
 //! by `ROBUST_SCALE` = 1 + 2*gamma(3), so rounding can never cull a box the ray
@@ -11,7 +11,7 @@ use glam::Vec4;
 use rayon::prelude::*;
 
 /// At most this many primitives per leaf; below it the SAH decides.
-const MAX_LEAF: usize = 8;
+pub(super) const MAX_LEAF: usize = 8;
 /// Bins per axis: few for small nodes, where filling and sweeping the bins
 /// costs more than it buys, many near the root, where split quality
 /// matters most. Like Embree's `min(32, 4 + 0.05 n)`, in four steps; with
@@ -42,8 +42,6 @@ const BLOCK: usize = 4;
 fn blocks(n: usize) -> f32 {
     n.div_ceil(BLOCK) as f32
 }
-/// Subtrees with more primitives than this are built in parallel.
-const PARALLEL_THRESHOLD: usize = 4096;
 /// Nodes with more primitives than this are also binned in parallel (the top
 /// levels, where the subtree parallelism has not started yet), in chunks of
 /// `BIN_CHUNK`. Bin counts and box unions are exact, so the tree does not
@@ -66,7 +64,7 @@ const MAX_SAH_DEPTH: usize = 64;
 /// operands: binning cost 25 cycles per primitive instead of about 8, and
 /// the whole 1M-triangle build ran at a third of its speed.
 #[derive(Clone, Copy)]
-struct PrimRef {
+pub(super) struct PrimRef {
     lo: Vec4,
     hi: Vec4,
 }
@@ -128,54 +126,93 @@ impl Box4 {
     }
 }
 
-/// The binary tree the SAH build produces; `wide` collapses it to W-wide.
-pub(super) enum BuildNode {
-    /// `first..first+count` index the primitive order returned with the tree.
-    Leaf { bounds: Aabb, first: usize, count: usize },
-    Interior { bounds: Aabb, count: usize, children: Box<(BuildNode, BuildNode)> },
+/// A node under construction: a run of the build's primitive references
+/// with their bounds. `split` divides it by the SAH, in place, into the two
+/// runs of its children; `wide` calls it until it has a node's `W` children,
+/// so the W-wide tree is built directly, with no binary tree in between.
+pub(super) struct BuildSet<'a> {
+    refs: &'a mut [PrimRef],
+    bounds: Box4,
+    cbounds: Box4,
+    /// Binary splits above this set.
+    depth: usize,
 }
 
-impl BuildNode {
-    const EMPTY: BuildNode = BuildNode::Leaf { bounds: Aabb::EMPTY, first: 0, count: 0 };
-
-    pub(super) fn bounds(&self) -> &Aabb {
-        match self {
-            BuildNode::Leaf { bounds, .. } | BuildNode::Interior { bounds, .. } => bounds,
-        }
-    }
-
-    /// Primitives under this node.
-    pub(super) fn count(&self) -> usize {
-        match self {
-            BuildNode::Leaf { count, .. } | BuildNode::Interior { count, .. } => *count,
-        }
-    }
-}
-
-impl Drop for BuildNode {
-    /// Large trees are freed in parallel: a serial recursive drop of the
-    /// 1M-triangle tree took about 20 ms, 7 % of its build.
-    fn drop(&mut self) {
-        if let BuildNode::Interior { count, children, .. } = self {
-            if *count > PARALLEL_THRESHOLD {
-                let (a, b) = std::mem::replace(&mut **children, (BuildNode::EMPTY, BuildNode::EMPTY));
-                rayon::join(move || drop(a), move || drop(b));
-            }
-        }
-    }
-}
-
-/// Binned-SAH build over `prims`: the tree and the primitive order its leaves
-/// index. `None` for no primitives.
-pub(super) fn build_tree(prims: &[Prim]) -> Option<(BuildNode, Vec<u32>)> {
-    let mut refs: Vec<PrimRef> = Vec::with_capacity(prims.len());
+/// References to every primitive of `prims`, in order.
+pub(super) fn prim_refs(prims: &[Prim]) -> Vec<PrimRef> {
+    let mut refs: Vec<PrimRef> = super::huge::vec_with_capacity(prims.len());
     refs.par_extend(prims.par_iter().enumerate().map(|(i, p)| PrimRef::new(&p.bounds(), i as u32)));
-    if refs.is_empty() {
-        return None;
+    refs
+}
+
+impl<'a> BuildSet<'a> {
+    /// The root set over all of `refs`; `None` when there are none.
+    pub(super) fn root(refs: &'a mut [PrimRef]) -> Option<BuildSet<'a>> {
+        if refs.is_empty() {
+            return None;
+        }
+        let (bounds, cbounds) = ref_bounds(refs);
+        Some(BuildSet { refs, bounds, cbounds, depth: 0 })
     }
-    let (bounds, cbounds) = ref_bounds(&refs);
-    let root = build_recursive(&mut refs, 0, 0, bounds, cbounds);
-    Some((root, refs.par_iter().map(|r| r.index()).collect()))
+
+    pub(super) fn len(&self) -> usize {
+        self.refs.len()
+    }
+
+    pub(super) fn bounds(&self) -> Aabb {
+        self.bounds.aabb()
+    }
+
+    pub(super) fn half_area(&self) -> f32 {
+        self.bounds.half_area()
+    }
+
+    /// The primitives' indices, into `buf` (at least `MAX_LEAF` long; a set
+    /// `split` refused has at most `MAX_LEAF` primitives).
+    pub(super) fn indices<'b>(&self, buf: &'b mut [u32; MAX_LEAF]) -> &'b [u32] {
+        for (b, r) in buf.iter_mut().zip(self.refs.iter()) {
+            *b = r.index();
+        }
+        &buf[..self.refs.len()]
+    }
+
+    /// The two children by binned SAH, or `Err(self)` when this set is a
+    /// leaf: one primitive, or at most `MAX_LEAF` that the SAH prefers to
+    /// test together.
+    pub(super) fn split(self) -> Result<(BuildSet<'a>, BuildSet<'a>), BuildSet<'a>> {
+        let n = self.refs.len();
+        if n == 1 {
+            return Err(self);
+        }
+        // Past MAX_SAH_DEPTH the SAH could keep peeling one primitive at a
+        // time off a pathological input; median splits bound the depth instead.
+        let split = if self.depth < MAX_SAH_DEPTH { find_split(self.refs, &self.bounds, &self.cbounds) } else { None };
+        if split.is_none() && n <= MAX_LEAF {
+            return Err(self);
+        }
+        let BuildSet { refs, cbounds, depth, .. } = self;
+        let sides = match split {
+            Some((axis, bin, bins)) => {
+                let b = Binning::new(&cbounds, bins);
+                let (m, left, right) = partition(refs, |r| b.left_of(r.centroid2(), axis, bin));
+                if m == 0 || m == n {
+                    None
+                } else {
+                    Some((m, left, right))
+                }
+            }
+            None => None,
+        };
+        let (mid, left, right) = sides.unwrap_or_else(|| {
+            // Too many primitives for one leaf and no SAH split (all centroids
+            // equal, or too deep): split at the median of the widest axis.
+            let axis = cbounds.aabb().largest_axis();
+            refs.select_nth_unstable_by(n / 2, |a, b| a.centroid2()[axis].total_cmp(&b.centroid2()[axis]));
+            (n / 2, ref_bounds(&refs[..n / 2]), ref_bounds(&refs[n / 2..]))
+        });
+        let (l, r) = refs.split_at_mut(mid);
+        Ok((BuildSet { refs: l, bounds: left.0, cbounds: left.1, depth: depth + 1 }, BuildSet { refs: r, bounds: right.0, cbounds: right.1, depth: depth + 1 }))
+    }
 }
 
 /// Ize's conservative factor, 1 + 2*gamma(3) with gamma(n) = n*eps/(1 - n*eps).
@@ -196,51 +233,6 @@ fn ref_bounds(refs: &[PrimRef]) -> (Box4, Box4) {
     } else {
         one(refs)
     }
-}
-
-/// Build over `refs`, whose primitive bounds and centroid bounds the caller
-/// passes (the parent's partition computed them on its way).
-fn build_recursive(refs: &mut [PrimRef], offset: usize, depth: usize, bounds: Box4, cbounds: Box4) -> BuildNode {
-    let n = refs.len();
-    if n == 1 {
-        return BuildNode::Leaf { bounds: bounds.aabb(), first: offset, count: 1 };
-    }
-    // Past MAX_SAH_DEPTH the SAH could keep peeling one primitive at a time
-    // off a pathological input; median splits bound the depth instead.
-    let split = if depth < MAX_SAH_DEPTH { find_split(refs, &bounds, &cbounds) } else { None };
-    let sides = match split {
-        Some((axis, bin, bins)) => {
-            let b = Binning::new(&cbounds, bins);
-            let (m, left, right) = partition(refs, |r| b.left_of(r.centroid2(), axis, bin));
-            if m == 0 || m == n {
-                None
-            } else {
-                Some((m, left, right))
-            }
-        }
-        None if n <= MAX_LEAF => return BuildNode::Leaf { bounds: bounds.aabb(), first: offset, count: n },
-        None => None,
-    };
-    let (mid, left_bounds, right_bounds) = sides.unwrap_or_else(|| {
-        // Too many primitives for one leaf and no SAH split (all centroids
-        // equal, or too deep): split at the median of the widest axis.
-        let axis = cbounds.aabb().largest_axis();
-        refs.select_nth_unstable_by(n / 2, |a, b| a.centroid2()[axis].total_cmp(&b.centroid2()[axis]));
-        (n / 2, ref_bounds(&refs[..n / 2]), ref_bounds(&refs[n / 2..]))
-    });
-    let (left, right) = refs.split_at_mut(mid);
-    let (l, r) = if n > PARALLEL_THRESHOLD {
-        rayon::join(
-            || build_recursive(left, offset, depth + 1, left_bounds.0, left_bounds.1),
-            || build_recursive(right, offset + mid, depth + 1, right_bounds.0, right_bounds.1),
-        )
-    } else {
-        (
-            build_recursive(left, offset, depth + 1, left_bounds.0, left_bounds.1),
-            build_recursive(right, offset + mid, depth + 1, right_bounds.0, right_bounds.1),
-        )
-    };
-    BuildNode::Interior { bounds: bounds.aabb(), count: n, children: Box::new((l, r)) }
 }
 
 /// Maps doubled centroids to bins, all three axes at once. Axes without

@@ -6,6 +6,7 @@
 
 pub mod brute;
 pub mod bvh;
+mod huge;
 pub mod wide;
 pub mod embree;
 pub mod prims;

@@ -64,7 +64,7 @@ impl Prim {
 /// Every primitive of every shape, in shape order.
 pub fn collect(shapes: &[Shape]) -> Vec<Prim> {
     let total = shapes.iter().map(|s| if let Shape::Mesh(m) = s { m.triangles.len() } else { 1 }).sum();
-    let mut out = Vec::with_capacity(total);
+    let mut out = super::huge::vec_with_capacity(total);
     for (g, shape) in shapes.iter().enumerate() {
         let g = g as u32;
         match shape {

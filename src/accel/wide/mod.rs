@@ -23,7 +23,7 @@ mod layout;
 use kernels::{intersect_group, sort_far_first, LaneHit, Shear, Slab};
 use layout::Arrays;
 
-use super::bvh::build_tree;
+use super::bvh::{prim_refs, BuildSet};
 use super::prims::{self, closer, Prim};
 use super::{Hit, Traversal};
 use crate::geometry::RayTransform;
@@ -136,13 +136,14 @@ impl<const W: usize> WideBvh<W> {
     pub fn build(shapes: &[Shape]) -> Self {
         assert!(W == 4 || W == 8, "WideBvh supports widths 4 and 8");
         let prims = prims::collect(shapes);
+        let mut refs = prim_refs(&prims);
         let mut out = Arrays::<W>::default();
-        let tree = build_tree(&prims);
         let (mut root, mut root_area) = (EMPTY, 0.0);
-        if let Some((tree, order)) = &tree {
+        if let Some(set) = BuildSet::root(&mut refs) {
+            root_area = set.half_area() as f64;
             out = Arrays::with_room_for(prims.len());
-            root = out.emit_parallel(tree, &prims, order);
-            root_area = tree.bounds().half_area() as f64;
+            root = out.build(set, &prims);
+            (out, root) = layout::flatten(layout::Piece { arrays: out, root });
         }
         let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), interleave: false };
         b.interleave = b.avx && b.memory_bytes() >= INTERLEAVE_BYTES;

@@ -180,3 +180,44 @@ fn frustum_accepts_coherent_packets() {
     assert!(frustum::Frustum::new(&fan, true).is_none(), "a packet fanned out over 0.75 rad must be traced ray by ray");
     assert!(frustum::Frustum::new(&fan[..2], true).is_some(), "two rays 0.05 apart stay a frustum");
 }
+
+/// A mesh large enough that the build splits it into pieces built in
+/// parallel (`layout::flatten`), with spheres scattered through it so that
+/// pieces hold leaf records and spheres too: traversal still matches brute
+/// force, and the flattened arrays are the same whatever the thread count.
+#[test]
+fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
+    let mut scene = procedural_scene(120_000);
+    let mut rng = Rng::new(3, 1);
+    for _ in 0..40 {
+        let c = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.4 - 1.2;
+        scene.shapes.push(Shape::Sphere { center: c, radius: 0.02 + 0.05 * rng.uniform() });
+    }
+    let shapes = scene.shapes.clone();
+    let in_pool = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| WideBvh::<8>::build(&shapes))
+    };
+    let (one, two) = (in_pool(1), in_pool(2));
+    assert!(one.nodes.len() > 1000 && one.leaves.len() > 0 && one.spheres.len() == 40, "{}", one.describe());
+    let bits = |b: &WideBvh<8>| {
+        let mut v: Vec<u32> = b.nodes.iter().flat_map(|n| n.bounds.iter().flatten().map(|f| f.to_bits()).chain(n.child)).collect();
+        v.extend(b.groups.iter().flat_map(|g| g.v.iter().flatten().flatten().map(|f| f.to_bits())));
+        v.extend(b.ids.iter().flatten());
+        v.extend(b.leaves.iter().flat_map(|l| [l.group, l.n_groups, l.sphere, l.n_spheres]));
+        v.push(b.root);
+        v
+    };
+    assert!(bits(&one) == bits(&two), "the layout depends on the thread count");
+    let brute = BruteForce::new(&shapes);
+    let mut rays = camera_rays(&Camera::from_scene(&scene), 40, 30);
+    rays.extend(random_rays(&scene, 1500, 11));
+    let mut hits = vec![None; rays.len()];
+    two.intersect_batch(&rays, &mut hits);
+    let mut occ = vec![false; rays.len()];
+    two.occluded_batch(&rays, &mut occ);
+    for (i, r) in rays.iter().enumerate() {
+        assert_eq!(hits[i], brute.intersect(r), "ray {i}: closest hit");
+        assert_eq!(occ[i], brute.occluded(r), "ray {i}: occlusion");
+    }
+}
