@@ -5,7 +5,7 @@
 //! by `ROBUST_SCALE` = 1 + 2*gamma(3), so rounding can never cull a box the ray
 //! really enters; with the watertight triangle test, closed meshes stay closed.
 
-use super::prims::Prim;
+use super::prims::PrimTable;
 use crate::geometry::Aabb;
 use glam::Vec4;
 use rayon::prelude::*;
@@ -139,9 +139,9 @@ pub(super) struct BuildSet<'a> {
 }
 
 /// References to every primitive of `prims`, in order.
-pub(super) fn prim_refs(prims: &[Prim]) -> Vec<PrimRef> {
+pub(super) fn prim_refs(prims: &PrimTable) -> Vec<PrimRef> {
     let mut refs: Vec<PrimRef> = super::huge::vec_with_capacity(prims.len());
-    refs.par_extend(prims.par_iter().enumerate().map(|(i, p)| PrimRef::new(&p.bounds(), i as u32)));
+    prims.par_map(&mut refs, |i, p| PrimRef::new(&p.bounds(), i));
     refs
 }
 

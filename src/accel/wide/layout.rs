@@ -7,7 +7,7 @@
 
 use super::{Leaf, Node, TriGroup, EMPTY, INLINE_BIT, INLINE_GROUP_LIMIT, LANES, LEAF_BIT};
 use crate::accel::bvh::{BuildSet, MAX_LEAF};
-use crate::accel::prims::Prim;
+use crate::accel::prims::{Prim, PrimTable};
 use crate::geometry::Aabb;
 use rayon::prelude::*;
 
@@ -100,7 +100,7 @@ impl<const W: usize> Arrays<W> {
     /// Build the subtree over `set` (primitives indexing `prims`), nodes
     /// depth first, triangle groups in leaf order; returns its child code.
     /// The layout does not depend on the thread count.
-    pub(super) fn build(&mut self, set: BuildSet, prims: &[Prim]) -> u32 {
+    pub(super) fn build(&mut self, set: BuildSet, prims: &PrimTable) -> u32 {
         let n = set.len();
         let (l, r) = match set.split() {
             Ok(sides) => sides,
@@ -142,7 +142,7 @@ impl<const W: usize> Arrays<W> {
         idx as u32
     }
 
-    fn child(&mut self, k: Kid, prims: &[Prim]) -> u32 {
+    fn child(&mut self, k: Kid, prims: &PrimTable) -> u32 {
         if k.leaf {
             self.emit_leaf(prims, &k.set)
         } else {
@@ -164,15 +164,15 @@ impl<const W: usize> Arrays<W> {
         n.child[lane] = code;
     }
 
-    fn emit_leaf(&mut self, prims: &[Prim], set: &BuildSet) -> u32 {
+    fn emit_leaf(&mut self, prims: &PrimTable, set: &BuildSet) -> u32 {
         let mut buf = [0; MAX_LEAF];
         let order = set.indices(&mut buf);
         let group = self.groups.len() as u32;
         let sphere = self.spheres.len() as u32;
-        let mut tris = order.iter().map(|&i| &prims[i as usize]).filter(|p| !p.is_sphere()).peekable();
+        let mut tris = order.iter().map(|&i| prims.get(i)).filter(|p| !p.is_sphere()).peekable();
         while tris.peek().is_some() {
             let mut g = TriGroup { v: [[[0.0; LANES]; 3]; 3] };
-            let mut first: Option<&Prim> = None;
+            let mut first: Option<Prim> = None;
             for lane in 0..LANES {
                 // Padding lanes repeat the group's first triangle; `ids` marks them empty.
                 let (p, real) = match tris.next() {
@@ -189,7 +189,7 @@ impl<const W: usize> Arrays<W> {
             }
             self.groups.push(g);
         }
-        self.spheres.extend(order.iter().map(|&i| prims[i as usize]).filter(|p| p.is_sphere()));
+        self.spheres.extend(order.iter().map(|&i| prims.get(i)).filter(|p| p.is_sphere()));
         let leaf = Leaf { group, n_groups: self.groups.len() as u32 - group, sphere, n_spheres: self.spheres.len() as u32 - sphere };
         if leaf.n_spheres == 0 && leaf.n_groups <= 3 && group < INLINE_GROUP_LIMIT {
             return LEAF_BIT | INLINE_BIT | leaf.n_groups << 28 | group;

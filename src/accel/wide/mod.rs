@@ -135,7 +135,7 @@ fn avx_available() -> bool {
 impl<const W: usize> WideBvh<W> {
     pub fn build(shapes: &[Shape]) -> Self {
         assert!(W == 4 || W == 8, "WideBvh supports widths 4 and 8");
-        let prims = prims::collect(shapes);
+        let prims = prims::PrimTable::new(shapes);
         let mut refs = prim_refs(&prims);
         let mut out = Arrays::<W>::default();
         let (mut root, mut root_area) = (EMPTY, 0.0);
