@@ -193,8 +193,8 @@ impl<'a> BuildSet<'a> {
         let BuildSet { refs, cbounds, depth, .. } = self;
         let sides = match split {
             Some((axis, bin, bins)) => {
-                let b = Binning::new(&cbounds, bins);
-                let (m, left, right) = partition(refs, |r| b.left_of(r.centroid2(), axis, bin));
+                let left_of = Binning::new(&cbounds, bins).left_of(axis, bin);
+                let (m, left, right) = partition(refs, |r| left_of.test(r.centroid2()));
                 if m == 0 || m == n {
                     None
                 } else {
@@ -278,11 +278,28 @@ impl Binning {
         }
     }
 
-    /// Whether `c` falls in bin `bin` or below on `axis`, as `bin` decides
-    /// it (`trunc(x) <= bin` is `x < bin + 1` for `x >= 0`).
+    /// A test of whether a centroid falls in bin `bin` or below on `axis`,
+    /// as `bin` decides it (`trunc(x) <= bin` is `x < bin + 1` for `x >= 0`).
+    fn left_of(&self, axis: usize, bin: usize) -> LeftOf {
+        LeftOf { lo: self.lo, scale: self.scale, limit: Vec4::splat((bin + 1) as f32), axis }
+    }
+}
+
+/// See `Binning::left_of`. All lanes are computed and the axis's lane's
+/// comparison picked from the sign mask: indexing a `Vec4` by a run-time
+/// axis compiled to a jump table in the partition's inner loop.
+struct LeftOf {
+    lo: Vec4,
+    scale: Vec4,
+    limit: Vec4,
+    axis: usize,
+}
+
+impl LeftOf {
     #[inline]
-    fn left_of(&self, c: Vec4, axis: usize, bin: usize) -> bool {
-        (c[axis] - self.lo[axis]) * self.scale[axis] < (bin + 1) as f32
+    fn test(&self, c: Vec4) -> bool {
+        let below = ((c - self.lo) * self.scale).cmplt(self.limit).bitmask();
+        below >> self.axis & 1 != 0
     }
 }
 
