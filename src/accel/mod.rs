@@ -110,7 +110,7 @@ pub trait Traversal: Send + Sync {
 }
 
 /// The backends selectable with `--backend`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum BackendKind {
     /// Our binned-SAH BVH.
     Native,
