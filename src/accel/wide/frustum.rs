@@ -1,14 +1,20 @@
 //! Coherent rays (camera rays, shadow rays towards one light) traced 16 at
 //! a time through the 8-wide tree: interior nodes are tested once per
 //! packet against the packet's *interval* ray (the box of its origins and
-//! of its reciprocal directions), and only nodes with leaf children test
-//! the rays one by one before their leaves are intersected ray by ray.
+//! of its reciprocal directions); each leaf box the interval ray enters is
+//! then tested against all the packet's rays at once (`RaysSoA::test`, 8
+//! rays per instruction), and only the rays that enter it intersect its
+//! triangles, ray by ray. Testing rays one by one against the 8 boxes of a
+//! leaf parent instead cost 15-30 % of coherent throughput (1 thread,
+//! Mrays/s before/after: 1M-triangle sphere camera 22.8-24.1 / 27.0-27.4,
+//! shadow 5.4 / 6.3; CBbunny camera 40.8 / 52.6, shadow 17.3 / 20.4; cow
+//! camera 46.1 / 56.5, shadow 12.7 / 14.8).
 //!
 //! Answers equal single-ray traversal bit for bit: the interval test is
 //! conservative (it enters every box any ray of the packet enters, see
-//! `Frustum::test`), the per-ray test at leaf parents is the single-ray test
-//! itself, and the tie rule makes the closest hit independent of the order
-//! leaves are visited in.
+//! `Frustum::test`), the per-ray leaf box test does the single-ray slab
+//! test's operations on each lane, and the tie rule makes the closest hit
+//! independent of the order leaves are visited in.
 //!
 //! Packets whose rays cannot share an interval ray (a zero or mixed-sign
 //! direction component, an invalid ray) are traced one ray at a time.
@@ -131,6 +137,62 @@ impl Frustum {
     }
 }
 
+/// A packet's rays in SoA form for testing them together against one box:
+/// the slab constants of `Slab::new`, ray by ray. Made when the packet
+/// first reaches a leaf: packets that leave the tree high up (background
+/// pixels) never pay for it.
+pub(super) struct RaysSoA {
+    o: [[f32; PACKET]; 3],
+    inv: [[f32; PACKET]; 3],
+    tmin: [f32; PACKET],
+}
+
+impl RaysSoA {
+    /// Up to `PACKET` rays; lanes past them hold finite placeholders.
+    pub(super) fn new(rays: &[Ray]) -> RaysSoA {
+        let mut soa = RaysSoA { o: [[0.0; PACKET]; 3], inv: [[1.0; PACKET]; 3], tmin: [0.0; PACKET] };
+        for (i, r) in rays.iter().enumerate() {
+            let slab = Slab::new(r);
+            for a in 0..3 {
+                soa.o[a][i] = slab.o[a];
+                soa.inv[a][i] = slab.inv[a];
+            }
+            soa.tmin[i] = r.tmin;
+        }
+        soa
+    }
+
+    /// Bit i set when ray i enters child `lane` of `n` in [tmin_i, tmax[i]]:
+    /// `Slab::test` of each ray for that one box, 8 rays per instruction
+    /// instead of 8 boxes, the same operations on each lane. The packet's
+    /// rays share their direction signs, so the near planes are `f`'s.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2; `W` must be 8.
+    #[inline(always)]
+    pub(super) unsafe fn test<const W: usize>(&self, f: &Frustum, n: &super::Node<W>, lane: usize, tmax: &[f32; PACKET]) -> u64 {
+        use std::arch::x86_64::*;
+        let scale = _mm256_set1_ps(ROBUST_SCALE);
+        let mut mask = 0u64;
+        for half in (0..PACKET).step_by(8) {
+            let mut t0 = _mm256_loadu_ps(self.tmin.as_ptr().add(half));
+            let mut t1 = _mm256_loadu_ps(tmax.as_ptr().add(half));
+            for a in 0..3 {
+                let lo = _mm256_set1_ps(n.bounds[f.near_plane[a]][lane]);
+                let hi = _mm256_set1_ps(n.bounds[(f.near_plane[a] + 3) % 6][lane]);
+                let o = _mm256_loadu_ps(self.o[a].as_ptr().add(half));
+                let inv = _mm256_loadu_ps(self.inv[a].as_ptr().add(half));
+                let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
+                let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
+                t0 = _mm256_max_ps(tn, t0);
+                t1 = _mm256_min_ps(tf, t1);
+            }
+            mask |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u64) << half;
+        }
+        mask
+    }
+}
+
 impl<const W: usize> WideBvh<W> {
     /// `hits[i]` = the closest hit of `rays[i]`, packets of `PACKET` rays.
     ///
@@ -170,10 +232,10 @@ impl<const W: usize> WideBvh<W> {
         // Per-ray constants are set up the first time a ray tests a node
         // itself: packets that leave the tree high up (background pixels)
         // never pay for them.
-        let mut slabs: [MaybeUninit<Slab>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
+        let mut soa: Option<RaysSoA> = None;
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut shears: [MaybeUninit<Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
-        let mut ready: u64 = 0;
+        let mut setup: u64 = 0;
         let mut tmax = [0.0f32; PACKET];
         for (i, r) in rays.iter().enumerate() {
             tmax[i] = r.tmax;
@@ -207,23 +269,27 @@ impl<const W: usize> WideBvh<W> {
                     self.prefetch(node.child[m.trailing_zeros() as usize]);
                     m &= m - 1;
                 }
-                let mut rays_left = active;
-                while rays_left != 0 {
-                    let i = rays_left.trailing_zeros() as usize;
-                    rays_left &= rays_left - 1;
-                    let mut ray_near = [0.0f32; W];
-                    if ready & (1u64 << i) == 0 {
-                        ready |= 1u64 << i;
-                        slabs[i].write(Slab::new(&rays[i]));
-                        let rt = RayTransform::new(rays[i].origin, rays[i].dir);
-                        shears[i].write(Shear::new(&rt));
-                        rts[i].write(rt);
+                let soa = soa.get_or_insert_with(|| RaysSoA::new(rays));
+                // Leaf by leaf, the rays that enter it (tested 8 at a time,
+                // the single-ray slab test's operations lane by lane).
+                let mut todo = mask & leaves;
+                while todo != 0 {
+                    let lane = todo.trailing_zeros() as usize;
+                    todo &= todo - 1;
+                    let mut rays_in = soa.test(f, node, lane, &tmax) & active;
+                    if rays_in == 0 {
+                        continue;
                     }
-                    let mut todo = slabs[i].assume_init_ref().test::<W, true>(node, rays[i].tmin, tmax[i], &mut ray_near) & mask & leaves;
-                    while todo != 0 {
-                        let lane = todo.trailing_zeros() as usize;
-                        todo &= todo - 1;
-                        let leaf = self.leaf_of(node.child[lane]);
+                    let leaf = self.leaf_of(node.child[lane]);
+                    while rays_in != 0 {
+                        let i = rays_in.trailing_zeros() as usize;
+                        rays_in &= rays_in - 1;
+                        if setup & (1u64 << i) == 0 {
+                            setup |= 1u64 << i;
+                            let rt = RayTransform::new(rays[i].origin, rays[i].dir);
+                            shears[i].write(Shear::new(&rt));
+                            rts[i].write(rt);
+                        }
                         let (best, t) = (&mut hits[i], &mut tmax[i]);
                         let found = self.leaf(&leaf, &rays[i], rts[i].assume_init_ref(), shears[i].assume_init_ref(), *t, &mut |h| {
                             if ANY {
@@ -241,7 +307,6 @@ impl<const W: usize> WideBvh<W> {
                             occluded[i] = true;
                             active &= !(1u64 << i);
                             tmax[i] = f32::NEG_INFINITY;
-                            break;
                         }
                     }
                 }

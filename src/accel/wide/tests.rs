@@ -160,6 +160,51 @@ unsafe fn avx_box_test(slab: &Slab, node: &Node<8>, tmin: f32, tmax: f32) -> (u3
     (m, near)
 }
 
+/// The packet's leaf box test (`RaysSoA::test`, 8 rays per instruction)
+/// decides exactly as each ray's own scalar slab test, rays that end short
+/// and box corners included.
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn packet_box_test_equals_the_single_ray_test() {
+    if !is_x86_feature_detected!("avx2") {
+        eprintln!("note: this CPU has no AVX2; the packet box test is not used here and was not exercised");
+        return;
+    }
+    let shapes = shapes();
+    let bvh = WideBvh::<8>::build(&shapes);
+    let mut packets = tight_packets(150, 21);
+    // Packets aimed at box corners, where the far plane's rounding
+    // allowance decides.
+    for node in bvh.nodes.iter().take(40) {
+        let hi = Vec3::new(node.bounds[3][0], node.bounds[4][0], node.bounds[5][0]);
+        let o = hi + Vec3::new(0.31, 0.27, 0.43);
+        packets.extend((0..frustum::PACKET).map(|i| Ray::new(o, hi - o + Vec3::splat(1e-4 * i as f32))));
+    }
+    let mut cases = 0;
+    for p in packets.chunks(frustum::PACKET) {
+        let Some(f) = frustum::Frustum::new(p, false) else { continue };
+        let soa = frustum::RaysSoA::new(p);
+        let mut tmax = [0.0f32; frustum::PACKET];
+        for (i, r) in p.iter().enumerate() {
+            tmax[i] = if i % 3 == 0 { r.tmax } else { 0.5 + i as f32 * 0.2 };
+        }
+        for node in &bvh.nodes {
+            for lane in (0..8).filter(|&l| node.child[l] != EMPTY) {
+                // SAFETY: AVX2 checked above.
+                let got = unsafe { soa.test(&f, node, lane, &tmax) } & ((1 << p.len()) - 1);
+                let mut want = 0u64;
+                for (i, r) in p.iter().enumerate() {
+                    let mut near = [0.0f32; 8];
+                    want |= ((Slab::new(r).test_scalar(node, r.tmin, tmax[i], &mut near) >> lane & 1) as u64) << i;
+                }
+                assert_eq!(got, want, "packet box test differs from the rays' own tests");
+                cases += 1;
+            }
+        }
+    }
+    assert!(cases > 100_000, "too few cases: {cases}");
+}
+
 #[test]
 fn frustum_accepts_coherent_packets() {
     let rays = tight_packets(100, 4);
