@@ -40,7 +40,7 @@ impl<const W: usize> Default for Arrays<W> {
 
 /// The interior children of wide nodes over more primitives than this are
 /// built in parallel, as pieces.
-const PARALLEL_BUILD: usize = 1 << 15;
+const PARALLEL_BUILD: usize = 1 << 12;
 
 /// A child gathered for a wide node: its primitives, and whether `split`
 /// already refused to split them (a leaf).
