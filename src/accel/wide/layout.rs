@@ -39,7 +39,9 @@ impl<const W: usize> Default for Arrays<W> {
 }
 
 /// The interior children of wide nodes over more primitives than this are
-/// built in parallel, as pieces.
+/// built in parallel, as pieces. At 2^15 the CBbunny (28k triangles) was
+/// built on one thread, 7.1 ms against Embree's 4.0 on two; at 2^12 it
+/// takes 4.2-4.4 ms, and the 1M-triangle build is unchanged.
 const PARALLEL_BUILD: usize = 1 << 12;
 
 /// A child gathered for a wide node: its primitives, and whether `split`
