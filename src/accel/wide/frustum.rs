@@ -4,11 +4,14 @@
 //! of its reciprocal directions); each leaf box the interval ray enters is
 //! then tested against all the packet's rays at once (`RaysSoA::test`, 8
 //! rays per instruction), and only the rays that enter it intersect its
-//! triangles, ray by ray. Testing rays one by one against the 8 boxes of a
-//! leaf parent instead cost 15-30 % of coherent throughput (1 thread,
-//! Mrays/s before/after: 1M-triangle sphere camera 22.8-24.1 / 27.0-27.4,
-//! shadow 5.4 / 6.3; CBbunny camera 40.8 / 52.6, shadow 17.3 / 20.4; cow
-//! camera 46.1 / 56.5, shadow 12.7 / 14.8).
+//! triangles, two rays per AVX2 instruction (`intersect_group_x2`).
+//!
+//! Measured (1 thread, Mrays/s, camera/shadow): testing each ray against
+//! the 8 boxes of a leaf parent instead of each leaf box against the rays
+//! cost 15-30 % (1M-triangle sphere 23.5/5.4 against 27.2/6.3, CBbunny
+//! 40.8/17.3 against 52.6/20.4, cow 46.1/12.7 against 56.5/14.8); pairing
+//! the rays' triangle tests then gave CBbunny 57/22.7, cow 63/16.6, 1M
+//! sphere 27.9/6.5.
 //!
 //! Answers equal single-ray traversal bit for bit: the interval test is
 //! conservative (it enters every box any ray of the packet enters, see
@@ -19,7 +22,8 @@
 //! Packets whose rays cannot share an interval ray (a zero or mixed-sign
 //! direction component, an invalid ray) are traced one ray at a time.
 
-use super::{Shear, Slab, WideBvh, EMPTY, LEAF_BIT, STACK};
+use super::kernels::{intersect_group, intersect_group_x2, LaneHit};
+use super::{Shear, Slab, WideBvh, EMPTY, LANES, LEAF_BIT, STACK};
 use crate::accel::bvh::ROBUST_SCALE;
 use crate::accel::prims::closer;
 use crate::accel::Hit;
@@ -281,14 +285,34 @@ impl<const W: usize> WideBvh<W> {
                         continue;
                     }
                     let leaf = self.leaf_of(node.child[lane]);
+                    macro_rules! ensure {
+                        ($i:expr) => {
+                            if setup & (1u64 << $i) == 0 {
+                                setup |= 1u64 << $i;
+                                let rt = RayTransform::new(rays[$i].origin, rays[$i].dir);
+                                shears[$i].write(Shear::new(&rt));
+                                rts[$i].write(rt);
+                            }
+                        };
+                    }
                     while rays_in != 0 {
                         let i = rays_in.trailing_zeros() as usize;
                         rays_in &= rays_in - 1;
-                        if setup & (1u64 << i) == 0 {
-                            setup |= 1u64 << i;
-                            let rt = RayTransform::new(rays[i].origin, rays[i].dir);
-                            shears[i].write(Shear::new(&rt));
-                            rts[i].write(rt);
+                        ensure!(i);
+                        // Two rays at a time through triangle-only leaves.
+                        if rays_in != 0 && leaf.n_spheres == 0 {
+                            let j = rays_in.trailing_zeros() as usize;
+                            rays_in &= rays_in - 1;
+                            ensure!(j);
+                            let found = self.leaf_pair::<ANY>(&leaf, [i, j], rays, &rts, &shears, &mut tmax, hits);
+                            for (k, hit) in [i, j].into_iter().zip(found) {
+                                if ANY && hit {
+                                    occluded[k] = true;
+                                    active &= !(1u64 << k);
+                                    tmax[k] = f32::NEG_INFINITY;
+                                }
+                            }
+                            continue;
                         }
                         let (best, t) = (&mut hits[i], &mut tmax[i]);
                         let found = self.leaf(&leaf, &rays[i], rts[i].assume_init_ref(), shears[i].assume_init_ref(), *t, &mut |h| {
@@ -326,5 +350,66 @@ impl<const W: usize> WideBvh<W> {
                 None => return,
             }
         }
+    }
+
+    /// A triangle-only leaf for rays `ij` together (`intersect_group_x2`),
+    /// as `leaf` would for each: every group tested with the range each ray
+    /// had on entering the leaf, closest hits kept by the tie rule. With
+    /// `ANY`, returns which rays found a hit (and stops testing them).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn leaf_pair<const ANY: bool>(
+        &self,
+        leaf: &super::Leaf,
+        ij: [usize; 2],
+        rays: &[Ray],
+        rts: &[MaybeUninit<RayTransform>; PACKET],
+        shears: &[MaybeUninit<Shear>; PACKET],
+        tmax: &mut [f32; PACKET],
+        hits: &mut [Option<Hit>],
+    ) -> [bool; 2] {
+        let rt = ij.map(|i| rts[i].assume_init_ref());
+        let sh = ij.map(|i| shears[i].assume_init_ref());
+        let tmin = ij.map(|i| rays[i].tmin);
+        let range = ij.map(|i| tmax[i]);
+        let mut found = [false; 2];
+        for gi in leaf.group..leaf.group + leaf.n_groups {
+            let g = &self.groups[gi as usize];
+            let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let mut out = [[LaneHit::default(); LANES]; 2];
+            let masks = if ANY && (found[0] || found[1]) {
+                // One ray is done: the other goes on alone.
+                let r = if found[0] { 1 } else { 0 };
+                let mut m = [0; 2];
+                m[r] = intersect_group(g, rt[r], sh[r], tmin[r], range[r], &mut out[r]);
+                m
+            } else {
+                intersect_group_x2(g, rt, sh, tmin, range, &mut out)
+            };
+            for r in 0..2 {
+                let mut m = masks[r];
+                while m != 0 {
+                    let lane = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if ids[lane][0] == EMPTY {
+                        continue;
+                    }
+                    if ANY {
+                        found[r] = true;
+                        break;
+                    }
+                    let l = out[r][lane];
+                    let h = Hit { t: l.t, u: l.u, v: l.v, geom_id: ids[lane][0], prim_id: ids[lane][1] };
+                    if closer(h, &hits[ij[r]]) {
+                        tmax[ij[r]] = h.t;
+                        hits[ij[r]] = Some(h);
+                    }
+                }
+            }
+            if ANY && found[0] && found[1] {
+                break;
+            }
+        }
+        found
     }
 }

@@ -1,6 +1,7 @@
 //! The SIMD kernels: the slab test of a node's boxes (SSE2, AVX2, scalar)
-//! and the watertight test of a group of four triangles (SSE2, scalar). All
-//! paths perform the same per-lane operations in the same order.
+//! and the watertight test of a group of four triangles (SSE2, scalar; AVX2
+//! for two rays at once). All paths perform the same per-lane operations in
+//! the same order.
 
 use super::{Node, TriGroup, LANES};
 use crate::accel::bvh::ROBUST_SCALE;
@@ -250,4 +251,94 @@ pub(super) fn intersect_group_scalar(g: &TriGroup, rt: &RayTransform, tmin: f32,
 pub(super) fn scalar_lane(g: &TriGroup, lane: usize, rt: &RayTransform, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
     let p = |k: usize| Vec3::new(g.v[k][0][lane], g.v[k][1][lane], g.v[k][2][lane]);
     intersect_triangle(rt, p(0), p(1), p(2), tmin, tmax)
+}
+
+/// `intersect_group` for two rays at once, ray `r` in the 128-bit half `r`
+/// of each AVX register: the same operations on every lane, so each ray's
+/// mask and hits are exactly those of `intersect_group` for that ray.
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(super) unsafe fn intersect_group_x2(g: &TriGroup, rt: [&RayTransform; 2], sh: [&Shear; 2], tmin: [f32; 2], tmax: [f32; 2], out: &mut [[LaneHit; LANES]; 2]) -> [u32; 2] {
+    use std::arch::x86_64::*;
+    let ld = |k: usize, a0: usize, a1: usize| _mm256_set_m128(_mm_load_ps(g.v[k][a1].as_ptr()), _mm_load_ps(g.v[k][a0].as_ptr()));
+    let pair = |x0: f32, x1: f32| _mm256_set_m128(_mm_set1_ps(x1), _mm_set1_ps(x0));
+    let ([kx0, ky0, kz0], [kx1, ky1, kz1]) = (sh[0].k, sh[1].k);
+    let ox = pair(sh[0].o[kx0], sh[1].o[kx1]);
+    let oy = pair(sh[0].o[ky0], sh[1].o[ky1]);
+    let oz = pair(sh[0].o[kz0], sh[1].o[kz1]);
+    let (sx, sy, sz) = (pair(sh[0].s[0], sh[1].s[0]), pair(sh[0].s[1], sh[1].s[1]), pair(sh[0].s[2], sh[1].s[2]));
+    let axk = _mm256_sub_ps(ld(0, kx0, kx1), ox);
+    let ayk = _mm256_sub_ps(ld(0, ky0, ky1), oy);
+    let azk = _mm256_sub_ps(ld(0, kz0, kz1), oz);
+    let bxk = _mm256_sub_ps(ld(1, kx0, kx1), ox);
+    let byk = _mm256_sub_ps(ld(1, ky0, ky1), oy);
+    let bzk = _mm256_sub_ps(ld(1, kz0, kz1), oz);
+    let cxk = _mm256_sub_ps(ld(2, kx0, kx1), ox);
+    let cyk = _mm256_sub_ps(ld(2, ky0, ky1), oy);
+    let czk = _mm256_sub_ps(ld(2, kz0, kz1), oz);
+    let ax = _mm256_sub_ps(axk, _mm256_mul_ps(sx, azk));
+    let ay = _mm256_sub_ps(ayk, _mm256_mul_ps(sy, azk));
+    let bx = _mm256_sub_ps(bxk, _mm256_mul_ps(sx, bzk));
+    let by = _mm256_sub_ps(byk, _mm256_mul_ps(sy, bzk));
+    let cx = _mm256_sub_ps(cxk, _mm256_mul_ps(sx, czk));
+    let cy = _mm256_sub_ps(cyk, _mm256_mul_ps(sy, czk));
+    let e0 = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+    let e1 = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+    let e2 = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+    let zero = _mm256_setzero_ps();
+    // The SSE comparisons' predicates: cmpeq EQ_OQ, cmplt LT_OS, cmpgt
+    // GT_OS, cmple LE_OS, cmpge GE_OS, cmpneq NEQ_UQ.
+    let eq = |a, b| _mm256_cmp_ps::<_CMP_EQ_OQ>(a, b);
+    let lt = |a, b| _mm256_cmp_ps::<_CMP_LT_OS>(a, b);
+    let gt = |a, b| _mm256_cmp_ps::<_CMP_GT_OS>(a, b);
+    let any_zero = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(eq(e0, zero), eq(e1, zero)), eq(e2, zero))) as u32;
+    let neg = _mm256_or_ps(_mm256_or_ps(lt(e0, zero), lt(e1, zero)), lt(e2, zero));
+    let pos = _mm256_or_ps(_mm256_or_ps(gt(e0, zero), gt(e1, zero)), gt(e2, zero));
+    let det = _mm256_add_ps(_mm256_add_ps(e0, e1), e2);
+    let abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+    let finite = lt(_mm256_and_ps(det, abs_mask), _mm256_set1_ps(f32::INFINITY));
+    let mut ok = _mm256_andnot_ps(_mm256_and_ps(neg, pos), _mm256_and_ps(finite, _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero)));
+    let az = _mm256_mul_ps(sz, azk);
+    let bz = _mm256_mul_ps(sz, bzk);
+    let cz = _mm256_mul_ps(sz, czk);
+    let ts = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(e0, az), _mm256_mul_ps(e1, bz)), _mm256_mul_ps(e2, cz));
+    let behind = _mm256_or_ps(
+        _mm256_and_ps(gt(det, zero), _mm256_cmp_ps::<_CMP_LE_OS>(ts, zero)),
+        _mm256_and_ps(lt(det, zero), _mm256_cmp_ps::<_CMP_GE_OS>(ts, zero)),
+    );
+    ok = _mm256_andnot_ps(behind, ok);
+    let mut mask = _mm256_movemask_ps(ok) as u32 & !any_zero;
+    if mask != 0 {
+        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+        let t = _mm256_mul_ps(ts, inv);
+        let in_range = _mm256_and_ps(gt(t, pair(tmin[0], tmin[1])), _mm256_cmp_ps::<_CMP_LE_OS>(t, pair(tmax[0], tmax[1])));
+        mask &= _mm256_movemask_ps(in_range) as u32;
+        let (mut tt, mut uu, mut vv) = ([0.0f32; 2 * LANES], [0.0f32; 2 * LANES], [0.0f32; 2 * LANES]);
+        _mm256_storeu_ps(tt.as_mut_ptr(), t);
+        _mm256_storeu_ps(uu.as_mut_ptr(), _mm256_mul_ps(e1, inv));
+        _mm256_storeu_ps(vv.as_mut_ptr(), _mm256_mul_ps(e2, inv));
+        for r in 0..2 {
+            for lane in 0..LANES {
+                let k = r * LANES + lane;
+                out[r][lane] = LaneHit { t: tt[k], u: uu[k], v: vv[k] };
+            }
+        }
+    }
+    let mut masks = [mask & 0xf, mask >> 4];
+    // Lanes with an exact zero edge function: the scalar test decides (in f64).
+    for r in 0..2 {
+        let mut z = (any_zero >> (4 * r)) & 0xf;
+        while z != 0 {
+            let lane = z.trailing_zeros() as usize;
+            z &= z - 1;
+            if let Some((t, u, v)) = scalar_lane(g, lane, rt[r], tmin[r], tmax[r]) {
+                out[r][lane] = LaneHit { t, u, v };
+                masks[r] |= 1 << lane;
+            }
+        }
+    }
+    masks
 }

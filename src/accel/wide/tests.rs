@@ -205,6 +205,52 @@ fn packet_box_test_equals_the_single_ray_test() {
     assert!(cases > 100_000, "too few cases: {cases}");
 }
 
+/// The two-ray triangle test (`intersect_group_x2`) gives each ray exactly
+/// the mask and hit bits of the one-ray test, exact-zero edge functions
+/// (rays through vertices, handed to the f64 path) included.
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn paired_triangle_test_equals_the_single_ray_test() {
+    if !is_x86_feature_detected!("avx2") {
+        eprintln!("note: this CPU has no AVX2; the paired triangle test is not used here and was not exercised");
+        return;
+    }
+    let shapes = shapes();
+    let bvh = WideBvh::<8>::build(&shapes);
+    let mut rays: Vec<Ray> = rays(&shapes).into_iter().filter(|r| r.is_valid()).step_by(3).collect();
+    // Rays through vertices, from axis-aligned origins so some edge
+    // functions are exactly zero.
+    for g in bvh.groups.iter().step_by(40) {
+        let v = Vec3::new(g.v[0][0][0], g.v[0][1][0], g.v[0][2][0]);
+        rays.push(Ray::new(v + Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.0, 0.0, -1.0)));
+        rays.push(Ray::new(v + Vec3::new(1.5, 0.0, 0.0), Vec3::new(-1.0, 0.0, 0.0)));
+    }
+    let (mut hits, mut zero_edge) = (0, 0);
+    for pair in rays.chunks_exact(2) {
+        let rt = [0, 1].map(|r| RayTransform::new(pair[r].origin, pair[r].dir));
+        let sh = [0, 1].map(|r| Shear::new(&rt[r]));
+        let tmin = [pair[0].tmin, pair[1].tmin];
+        let tmax = [pair[0].tmax, 3.0];
+        for g in &bvh.groups {
+            let mut got = [[LaneHit::default(); LANES]; 2];
+            // SAFETY: AVX2 checked above.
+            let m2 = unsafe { kernels::intersect_group_x2(g, [&rt[0], &rt[1]], [&sh[0], &sh[1]], tmin, tmax, &mut got) };
+            for r in 0..2 {
+                let mut want = [LaneHit::default(); LANES];
+                let m1 = intersect_group(g, &rt[r], &sh[r], tmin[r], tmax[r], &mut want);
+                assert_eq!(m2[r], m1, "paired triangle test mask differs");
+                for lane in (0..LANES).filter(|l| m1 & (1 << l) != 0) {
+                    let bits = |h: &LaneHit| [h.t, h.u, h.v].map(f32::to_bits);
+                    assert_eq!(bits(&got[r][lane]), bits(&want[lane]));
+                    hits += 1;
+                    zero_edge += (want[lane].u == 0.0 || want[lane].v == 0.0 || want[lane].u + want[lane].v == 1.0) as usize;
+                }
+            }
+        }
+    }
+    assert!(hits > 1000 && zero_edge > 0, "too few cases: {hits} hits, {zero_edge} on an edge or vertex");
+}
+
 #[test]
 fn frustum_accepts_coherent_packets() {
     let rays = tight_packets(100, 4);
