@@ -22,7 +22,7 @@
 //! Packets whose rays cannot share an interval ray (a zero or mixed-sign
 //! direction component, an invalid ray) are traced one ray at a time.
 
-use super::kernels::{intersect_group, intersect_group_x2, LaneHit};
+use super::kernels::{intersect_group, intersect_group_x2, intersect_group_x4, LaneHit};
 use super::{Shear, Slab, WideBvh, EMPTY, LANES, LEAF_BIT, STACK};
 use crate::accel::bvh::ROBUST_SCALE;
 use crate::accel::prims::closer;
@@ -197,7 +197,62 @@ impl RaysSoA {
     }
 }
 
+impl RaysSoA {
+    /// `test` with all 16 rays in one AVX-512 register.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F; `W` must be 8.
+    #[inline(always)]
+    pub(super) unsafe fn test512<const W: usize>(&self, f: &Frustum, n: &super::Node<W>, lane: usize, tmax: &[f32; PACKET]) -> u64 {
+        use std::arch::x86_64::*;
+        let scale = _mm512_set1_ps(ROBUST_SCALE);
+        let mut t0 = _mm512_loadu_ps(self.tmin.as_ptr());
+        let mut t1 = _mm512_loadu_ps(tmax.as_ptr());
+        for a in 0..3 {
+            let lo = _mm512_set1_ps(n.bounds[f.near_plane[a]][lane]);
+            let hi = _mm512_set1_ps(n.bounds[(f.near_plane[a] + 3) % 6][lane]);
+            let o = _mm512_loadu_ps(self.o[a].as_ptr());
+            let inv = _mm512_loadu_ps(self.inv[a].as_ptr());
+            let tn = _mm512_mul_ps(_mm512_sub_ps(lo, o), inv);
+            let tf = _mm512_mul_ps(_mm512_mul_ps(_mm512_sub_ps(hi, o), inv), scale);
+            t0 = _mm512_max_ps(tn, t0);
+            t1 = _mm512_min_ps(tf, t1);
+        }
+        _mm512_cmp_ps_mask::<_CMP_LE_OQ>(t0, t1) as u64
+    }
+}
+
 impl<const W: usize> WideBvh<W> {
+    /// `closest_coherent_avx` with the AVX-512 packet kernels.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and AVX-512F (`self.avx512`); `W` must be 8.
+    #[target_feature(enable = "avx2,avx512f")]
+    pub(super) unsafe fn closest_coherent_avx512(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        let mut unused = [false; PACKET];
+        for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            match Frustum::new(r, false) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false, true>(&f, r, h, &mut unused),
+                _ => self.closest_all::<true>(r, h),
+            }
+        }
+    }
+
+    /// `any_coherent_avx` with the AVX-512 packet kernels.
+    ///
+    /// # Safety
+    /// As `closest_coherent_avx512`.
+    #[target_feature(enable = "avx2,avx512f")]
+    pub(super) unsafe fn any_coherent_avx512(&self, rays: &[Ray], out: &mut [bool]) {
+        let mut unused = [None; PACKET];
+        for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            match Frustum::new(r, true) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true, true>(&f, r, &mut unused, o),
+                _ => self.any_all::<true>(r, o),
+            }
+        }
+    }
+
     /// `hits[i]` = the closest hit of `rays[i]`, packets of `PACKET` rays.
     ///
     /// # Safety
@@ -207,7 +262,7 @@ impl<const W: usize> WideBvh<W> {
         let mut unused = [false; PACKET];
         for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
             match Frustum::new(r, false) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false>(&f, r, h, &mut unused),
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false, false>(&f, r, h, &mut unused),
                 _ => self.closest_all::<true>(r, h),
             }
         }
@@ -222,16 +277,17 @@ impl<const W: usize> WideBvh<W> {
         let mut unused = [None; PACKET];
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             match Frustum::new(r, true) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true>(&f, r, &mut unused, o),
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true, false>(&f, r, &mut unused, o),
                 _ => self.any_all::<true>(r, o),
             }
         }
     }
 
     /// Closest hits into `hits` or, with `ANY`, occlusion into `occluded`
-    /// (rays leave the packet once occluded).
+    /// (rays leave the packet once occluded). `WIDE`: with the AVX-512
+    /// kernels (16 rays per leaf box test, 4 per triangle group test).
     #[inline(always)]
-    unsafe fn frustum_packet<const ANY: bool>(&self, f: &Frustum, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
+    unsafe fn frustum_packet<const ANY: bool, const WIDE: bool>(&self, f: &Frustum, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
         let n = rays.len();
         // Per-ray constants are set up the first time a ray tests a node
         // itself: packets that leave the tree high up (background pixels)
@@ -280,7 +336,7 @@ impl<const W: usize> WideBvh<W> {
                 while todo != 0 {
                     let lane = todo.trailing_zeros() as usize;
                     todo &= todo - 1;
-                    let mut rays_in = soa.test(f, node, lane, &tmax) & active;
+                    let mut rays_in = if WIDE { soa.test512(f, node, lane, &tmax) } else { soa.test(f, node, lane, &tmax) } & active;
                     if rays_in == 0 {
                         continue;
                     }
@@ -299,6 +355,30 @@ impl<const W: usize> WideBvh<W> {
                         let i = rays_in.trailing_zeros() as usize;
                         rays_in &= rays_in - 1;
                         ensure!(i);
+                        // Four rays at a time through triangle-only leaves
+                        // with AVX-512 (the last repeated when there are
+                        // three), else two.
+                        if WIDE && rays_in.count_ones() >= 2 && leaf.n_spheres == 0 {
+                            let mut quad = [i; 4];
+                            for q in 1..4 {
+                                if rays_in != 0 {
+                                    quad[q] = rays_in.trailing_zeros() as usize;
+                                    rays_in &= rays_in - 1;
+                                    ensure!(quad[q]);
+                                } else {
+                                    quad[q] = quad[q - 1];
+                                }
+                            }
+                            let found = self.leaf_quad::<ANY>(&leaf, quad, rays, &rts, &shears, &mut tmax, hits);
+                            for (k, hit) in quad.into_iter().zip(found) {
+                                if ANY && hit {
+                                    occluded[k] = true;
+                                    active &= !(1u64 << k);
+                                    tmax[k] = f32::NEG_INFINITY;
+                                }
+                            }
+                            continue;
+                        }
                         // Two rays at a time through triangle-only leaves.
                         if rays_in != 0 && leaf.n_spheres == 0 {
                             let j = rays_in.trailing_zeros() as usize;
@@ -407,6 +487,60 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             if ANY && found[0] && found[1] {
+                break;
+            }
+        }
+        found
+    }
+
+    /// `leaf_pair` for four rays (`intersect_group_x4`); a ray may appear
+    /// twice (its hits are then offered twice, which the tie rule ignores).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn leaf_quad<const ANY: bool>(
+        &self,
+        leaf: &super::Leaf,
+        quad: [usize; 4],
+        rays: &[Ray],
+        rts: &[MaybeUninit<RayTransform>; PACKET],
+        shears: &[MaybeUninit<Shear>; PACKET],
+        tmax: &mut [f32; PACKET],
+        hits: &mut [Option<Hit>],
+    ) -> [bool; 4] {
+        let rt = quad.map(|i| rts[i].assume_init_ref());
+        let sh = quad.map(|i| shears[i].assume_init_ref());
+        let tmin = quad.map(|i| rays[i].tmin);
+        let range = quad.map(|i| tmax[i]);
+        let mut found = [false; 4];
+        for gi in leaf.group..leaf.group + leaf.n_groups {
+            let g = &self.groups[gi as usize];
+            let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let mut out = [[LaneHit::default(); LANES]; 4];
+            let masks = intersect_group_x4(g, rt, sh, tmin, range, &mut out);
+            for r in 0..4 {
+                if ANY && found[r] {
+                    continue;
+                }
+                let mut m = masks[r];
+                while m != 0 {
+                    let lane = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if ids[lane][0] == EMPTY {
+                        continue;
+                    }
+                    if ANY {
+                        found[r] = true;
+                        break;
+                    }
+                    let l = out[r][lane];
+                    let h = Hit { t: l.t, u: l.u, v: l.v, geom_id: ids[lane][0], prim_id: ids[lane][1] };
+                    if closer(h, &hits[quad[r]]) {
+                        tmax[quad[r]] = h.t;
+                        hits[quad[r]] = Some(h);
+                    }
+                }
+            }
+            if ANY && found.iter().all(|&f| f) {
                 break;
             }
         }

@@ -99,6 +99,9 @@ pub struct WideBvh<const W: usize> {
     /// Box tests with AVX2 (8 boxes per instruction): `W` = 8 on a CPU that
     /// has it, unless `PATHTRACER_NATIVE_ISA=sse` asks for the SSE2 path.
     avx: bool,
+    /// Coherent packets with AVX-512 (16 rays per leaf box test, 4 rays per
+    /// triangle group test); see `avx512_requested`.
+    avx512: bool,
     /// Trace incoherent batches several rays at a time (`interleave`): the
     /// structure is too large for the caches, so traversal waits on memory.
     interleave: bool,
@@ -132,6 +135,25 @@ fn avx_available() -> bool {
     }
 }
 
+/// Whether to run the AVX-512 packet kernels: only when asked for with
+/// `PATHTRACER_NATIVE_ISA=avx512` and the CPU has AVX-512F. Not the
+/// default, by measurement (1 thread, Mrays/s, AVX2 against AVX-512, three
+/// runs each, medians): on this project's 2-core AMD EPYC (Zen 5) within
+/// noise on every scene (cow camera 65.8/65.4, CBbunny shadow 22.3/23.0,
+/// 1M sphere camera 29.1/29.0); on the device machine's 16-core Xeon the 1M
+/// camera rays lost 30 % (18.9 against 13.2), likely the lower clock Intel
+/// CPUs run AVX-512 code at.
+fn avx512_requested() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        avx_available() && std::env::var("PATHTRACER_NATIVE_ISA").is_ok_and(|v| v == "avx512") && is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 impl<const W: usize> WideBvh<W> {
     pub fn build(shapes: &[Shape]) -> Self {
         assert!(W == 4 || W == 8, "WideBvh supports widths 4 and 8");
@@ -145,7 +167,7 @@ impl<const W: usize> WideBvh<W> {
             root = out.build(set, &prims);
             (out, root) = layout::flatten(layout::Piece { arrays: out, root });
         }
-        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), interleave: false };
+        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), avx512: W == 8 && avx512_requested(), interleave: false };
         b.interleave = b.avx && b.memory_bytes() >= INTERLEAVE_BYTES;
         b
     }
@@ -405,7 +427,7 @@ impl<const W: usize> Traversal for WideBvh<W> {
         let sah = self.sah();
         format!(
             "native ({W}-wide BVH, binned SAH, {}, {} nodes, {} triangle groups of 4, {} leaf records, SAH cost {:.2} = nodes {:.2} + leaves {:.2})",
-            if self.avx { "AVX2" } else { "SSE2" },
+            if self.avx512 { "AVX2, AVX-512 packets" } else if self.avx { "AVX2" } else { "SSE2" },
             self.nodes.len(),
             self.groups.len(),
             self.leaves.len(),
@@ -472,6 +494,11 @@ impl<const W: usize> Traversal for WideBvh<W> {
     fn intersect_coherent(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), hits.len());
         #[cfg(target_arch = "x86_64")]
+        if self.avx512 {
+            // SAFETY: `avx512` is only set when the CPU has AVX2 and AVX-512F.
+            return unsafe { self.closest_coherent_avx512(rays, hits) };
+        }
+        #[cfg(target_arch = "x86_64")]
         if self.avx && W == 8 {
             // SAFETY: `avx` is only set when the CPU has AVX2.
             return unsafe { self.closest_coherent_avx(rays, hits) };
@@ -481,6 +508,11 @@ impl<const W: usize> Traversal for WideBvh<W> {
 
     fn occluded_coherent(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len());
+        #[cfg(target_arch = "x86_64")]
+        if self.avx512 {
+            // SAFETY: as above.
+            return unsafe { self.any_coherent_avx512(rays, out) };
+        }
         #[cfg(target_arch = "x86_64")]
         if self.avx && W == 8 {
             // SAFETY: as above.

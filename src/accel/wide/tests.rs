@@ -66,12 +66,19 @@ fn every_width_and_instruction_set_matches_brute_force() {
     // force them here.
     let mut interleaved = WideBvh::<8>::build(&shapes);
     interleaved.interleave = interleaved.avx;
-    let candidates: Vec<(&str, Box<dyn Traversal>)> = vec![
+    let mut candidates: Vec<(&str, Box<dyn Traversal>)> = vec![
         ("4-wide", Box::new(WideBvh::<4>::build(&shapes))),
         ("8-wide SSE2", Box::new(sse8)),
         ("8-wide default", Box::new(WideBvh::<8>::build(&shapes))),
         ("8-wide interleaved", Box::new(interleaved)),
     ];
+    if avx512_on() {
+        let mut wide = WideBvh::<8>::build(&shapes);
+        wide.avx512 = true;
+        candidates.push(("8-wide AVX-512 packets", Box::new(wide)));
+    } else {
+        eprintln!("note: this CPU has no AVX-512F; the AVX-512 packet kernels were not exercised");
+    }
     if !avx8_on {
         eprintln!("note: this CPU has no AVX2; the AVX2 paths were not exercised");
     }
@@ -160,7 +167,20 @@ unsafe fn avx_box_test(slab: &Slab, node: &Node<8>, tmin: f32, tmax: f32) -> (u3
     (m, near)
 }
 
-/// The packet's leaf box test (`RaysSoA::test`, 8 rays per instruction)
+/// Whether this CPU has what the AVX-512 packet kernels need.
+fn avx512_on() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// The packet's leaf box test (`RaysSoA::test`, 8 rays per instruction;
+/// `test512`, 16, where the CPU has AVX-512F)
 /// decides exactly as each ray's own scalar slab test, rays that end short
 /// and box corners included.
 #[cfg(target_arch = "x86_64")]
@@ -192,6 +212,10 @@ fn packet_box_test_equals_the_single_ray_test() {
             for lane in (0..8).filter(|&l| node.child[l] != EMPTY) {
                 // SAFETY: AVX2 checked above.
                 let got = unsafe { soa.test(&f, node, lane, &tmax) } & ((1 << p.len()) - 1);
+                if avx512_on() {
+                    // SAFETY: checked by `avx512_on`.
+                    assert_eq!(unsafe { avx512_box_test(&soa, &f, node, lane, &tmax) } & ((1 << p.len()) - 1), got, "AVX-512 packet box test");
+                }
                 let mut want = 0u64;
                 for (i, r) in p.iter().enumerate() {
                     let mut near = [0.0f32; 8];
@@ -205,9 +229,10 @@ fn packet_box_test_equals_the_single_ray_test() {
     assert!(cases > 100_000, "too few cases: {cases}");
 }
 
-/// The two-ray triangle test (`intersect_group_x2`) gives each ray exactly
-/// the mask and hit bits of the one-ray test, exact-zero edge functions
-/// (rays through vertices, handed to the f64 path) included.
+/// The two- and four-ray triangle tests (`intersect_group_x2`, AVX2, and
+/// `intersect_group_x4`, AVX-512, where the CPU has it) give each ray
+/// exactly the mask and hit bits of the one-ray test, exact-zero edge
+/// functions (rays through vertices, handed to the f64 path) included.
 #[cfg(target_arch = "x86_64")]
 #[test]
 fn paired_triangle_test_equals_the_single_ray_test() {
@@ -235,13 +260,23 @@ fn paired_triangle_test_equals_the_single_ray_test() {
             let mut got = [[LaneHit::default(); LANES]; 2];
             // SAFETY: AVX2 checked above.
             let m2 = unsafe { kernels::intersect_group_x2(g, [&rt[0], &rt[1]], [&sh[0], &sh[1]], tmin, tmax, &mut got) };
+            let mut got4 = [[LaneHit::default(); LANES]; 4];
+            // Rays 0, 1, 0, 1 in the four lanes of the AVX-512 kernel.
+            // SAFETY: checked by `avx512_on`.
+            let m4 = avx512_on().then(|| unsafe { avx512_group_test(g, [&rt[0], &rt[1], &rt[0], &rt[1]], [&sh[0], &sh[1], &sh[0], &sh[1]], [tmin[0], tmin[1], tmin[0], tmin[1]], [tmax[0], tmax[1], tmax[0], tmax[1]], &mut got4) });
             for r in 0..2 {
                 let mut want = [LaneHit::default(); LANES];
                 let m1 = intersect_group(g, &rt[r], &sh[r], tmin[r], tmax[r], &mut want);
                 assert_eq!(m2[r], m1, "paired triangle test mask differs");
+                if let Some(m4) = m4 {
+                    assert_eq!([m4[r], m4[r + 2]], [m1, m1], "AVX-512 triangle test mask differs");
+                }
                 for lane in (0..LANES).filter(|l| m1 & (1 << l) != 0) {
                     let bits = |h: &LaneHit| [h.t, h.u, h.v].map(f32::to_bits);
                     assert_eq!(bits(&got[r][lane]), bits(&want[lane]));
+                    if m4.is_some() {
+                        assert_eq!([bits(&got4[r][lane]), bits(&got4[r + 2][lane])], [bits(&want[lane]); 2], "AVX-512 triangle test hit");
+                    }
                     hits += 1;
                     zero_edge += (want[lane].u == 0.0 || want[lane].v == 0.0 || want[lane].u + want[lane].v == 1.0) as usize;
                 }
@@ -249,6 +284,18 @@ fn paired_triangle_test_equals_the_single_ray_test() {
         }
     }
     assert!(hits > 1000 && zero_edge > 0, "too few cases: {hits} hits, {zero_edge} on an edge or vertex");
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+unsafe fn avx512_box_test(soa: &frustum::RaysSoA, f: &frustum::Frustum, node: &Node<8>, lane: usize, tmax: &[f32; frustum::PACKET]) -> u64 {
+    soa.test512(f, node, lane, tmax)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+unsafe fn avx512_group_test(g: &TriGroup, rt: [&RayTransform; 4], sh: [&Shear; 4], tmin: [f32; 4], tmax: [f32; 4], out: &mut [[LaneHit; LANES]; 4]) -> [u32; 4] {
+    kernels::intersect_group_x4(g, rt, sh, tmin, tmax, out)
 }
 
 #[test]
@@ -290,7 +337,7 @@ fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
         pool.install(|| WideBvh::<8>::build(&shapes))
     };
     let (one, two) = (in_pool(1), in_pool(2));
-    assert!(one.nodes.len() > 1000 && one.leaves.len() > 0 && one.spheres.len() == 40, "{}", one.describe());
+    assert!(one.nodes.len() > 1000 && !one.leaves.is_empty() && one.spheres.len() == 40, "{}", one.describe());
     let bits = |b: &WideBvh<8>| {
         let mut v: Vec<u32> = b.nodes.iter().flat_map(|n| n.bounds.iter().flatten().map(|f| f.to_bits()).chain(n.child)).collect();
         v.extend(b.groups.iter().flat_map(|g| g.v.iter().flatten().flatten().map(|f| f.to_bits())));
