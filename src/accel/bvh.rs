@@ -79,7 +79,7 @@ impl PrimRef {
     }
 
     #[inline]
-    fn index(&self) -> u32 {
+    pub(super) fn index(&self) -> u32 {
         (self.lo.w.to_bits() & MANTISSA) | (self.hi.w.to_bits() & MANTISSA) << 23
     }
 
@@ -136,6 +136,8 @@ pub(super) struct BuildSet<'a> {
     cbounds: Box4,
     /// Binary splits above this set.
     depth: usize,
+    /// Index of `refs[0]` in the root's references.
+    offset: usize,
 }
 
 /// References to every primitive of `prims`, in order.
@@ -152,7 +154,7 @@ impl<'a> BuildSet<'a> {
             return None;
         }
         let (bounds, cbounds) = ref_bounds(refs);
-        Some(BuildSet { refs, bounds, cbounds, depth: 0 })
+        Some(BuildSet { refs, bounds, cbounds, depth: 0, offset: 0 })
     }
 
     pub(super) fn len(&self) -> usize {
@@ -167,13 +169,15 @@ impl<'a> BuildSet<'a> {
         self.bounds.half_area()
     }
 
-    /// The primitives' indices, into `buf` (at least `MAX_LEAF` long; a set
-    /// `split` refused has at most `MAX_LEAF` primitives).
-    pub(super) fn indices<'b>(&self, buf: &'b mut [u32; MAX_LEAF]) -> &'b [u32] {
-        for (b, r) in buf.iter_mut().zip(self.refs.iter()) {
-            *b = r.index();
-        }
-        &buf[..self.refs.len()]
+    /// The primitives' indices, in the set's order.
+    pub(super) fn indices(&self) -> impl Iterator<Item = u32> + '_ {
+        self.refs.iter().map(|r| r.index())
+    }
+
+    /// Where the set starts in the references `root` was given; they keep
+    /// the set's order once the build is done with it.
+    pub(super) fn offset(&self) -> usize {
+        self.offset
     }
 
     /// The two children by binned SAH, or `Err(self)` when this set is a
@@ -190,7 +194,7 @@ impl<'a> BuildSet<'a> {
         if split.is_none() && n <= MAX_LEAF {
             return Err(self);
         }
-        let BuildSet { refs, cbounds, depth, .. } = self;
+        let BuildSet { refs, cbounds, depth, offset, .. } = self;
         let sides = match split {
             Some((axis, bin, bins)) => {
                 let left_of = Binning::new(&cbounds, bins).left_of(axis, bin);
@@ -211,7 +215,7 @@ impl<'a> BuildSet<'a> {
             (n / 2, ref_bounds(&refs[..n / 2]), ref_bounds(&refs[n / 2..]))
         });
         let (l, r) = refs.split_at_mut(mid);
-        Ok((BuildSet { refs: l, bounds: left.0, cbounds: left.1, depth: depth + 1 }, BuildSet { refs: r, bounds: right.0, cbounds: right.1, depth: depth + 1 }))
+        Ok((BuildSet { refs: l, bounds: left.0, cbounds: left.1, depth: depth + 1, offset }, BuildSet { refs: r, bounds: right.0, cbounds: right.1, depth: depth + 1, offset: offset + mid }))
     }
 }
 

@@ -99,6 +99,13 @@ impl<'a> PrimTable<'a> {
         self.of_shape(g, i - self.starts[g])
     }
 
+    /// Whether primitive `i` is a sphere.
+    #[inline]
+    pub fn is_sphere(&self, i: u32) -> bool {
+        let g = self.starts.partition_point(|&s| s <= i) - 1;
+        matches!(self.shapes[g], Shape::Sphere { .. })
+    }
+
     /// Primitive `j` of shape `g`.
     #[inline]
     fn of_shape(&self, g: usize, j: u32) -> Prim {

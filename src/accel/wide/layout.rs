@@ -1,42 +1,77 @@
-//! Building the W-wide arrays traversal reads, straight from SAH splits:
-//! nodes depth first, triangle groups in leaf order. Large subtrees are built
-//! in parallel as pieces of their own, which `flatten` then copies, in
-//! parallel too, into one set of arrays: each piece is copied once, and
+//! Building the W-wide arrays traversal reads, straight from SAH splits,
+//! in two passes. The build records nodes (depth first) and leaves (as
+//! runs of the build references), large subtrees in parallel as pieces of
+//! their own; `flatten` then gives every piece its place in the final
+//! arrays and, in parallel, copies its nodes there and writes its leaves'
+//! triangle groups straight into place. Triangle data is written once, and
 //! since where a subtree becomes a piece depends only on its size, the
 //! layout never depends on the thread count.
 
 use super::{Leaf, Node, TriGroup, EMPTY, INLINE_BIT, INLINE_GROUP_LIMIT, LANES, LEAF_BIT};
-use crate::accel::bvh::{BuildSet, MAX_LEAF};
+use crate::accel::bvh::{BuildSet, PrimRef};
 use crate::accel::prims::{Prim, PrimTable};
 use crate::geometry::Aabb;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
-/// The arrays of a tree being laid out.
+/// The arrays traversal reads.
+#[derive(Default)]
 pub(super) struct Arrays<const W: usize> {
     pub(super) nodes: Vec<Node<W>>,
     pub(super) leaves: Vec<Leaf>,
     pub(super) groups: Vec<TriGroup>,
     pub(super) ids: Vec<[u32; 2]>,
     pub(super) spheres: Vec<Prim>,
-    /// Subtrees built in parallel; a child code `PIECE_BIT | k` here stands
-    /// for the root of `pieces[k]`, until `flatten` places it.
-    pieces: Vec<Piece<W>>,
 }
 
-/// A subtree built on its own: its arrays and its root's code in them.
+/// A leaf as the build records it: build references
+/// `refs[first..first + count]`, `tris` of them triangles, the rest spheres.
+#[derive(Clone, Copy)]
+struct Pending {
+    first: u32,
+    count: u8,
+    tris: u8,
+}
+
+impl Pending {
+    fn groups(&self) -> u32 {
+        (self.tris as u32).div_ceil(LANES as u32)
+    }
+
+    fn spheres(&self) -> u32 {
+        (self.count - self.tris) as u32
+    }
+
+    /// Triangles only, at most three groups: described by the child code
+    /// itself (`INLINE_BIT`), else by a leaf record.
+    fn inline(&self) -> bool {
+        self.spheres() == 0 && self.groups() <= 3
+    }
+}
+
+/// A subtree being built: its nodes, whose leaf child codes
+/// `LEAF_BIT | k` stand for `leaves[k]`, and its pieces, built in parallel,
+/// whose roots child codes `PIECE_BIT | k` stand for; `flatten` replaces
+/// both with final codes.
+#[derive(Default)]
+pub(super) struct Part<const W: usize> {
+    nodes: Vec<Node<W>>,
+    leaves: Vec<Pending>,
+    pieces: Vec<Piece<W>>,
+    /// Totals over `leaves`: triangle groups, leaf records, spheres.
+    groups: u32,
+    records: u32,
+    spheres: u32,
+}
+
+/// A subtree built on its own: its part and its root's code in it.
 pub(super) struct Piece<const W: usize> {
-    pub(super) arrays: Arrays<W>,
+    pub(super) part: Part<W>,
     pub(super) root: u32,
 }
 
-/// See `Arrays::pieces`. Node indices stay below it (asserted in `flatten`).
+/// See `Part`. Node indices stay below it (asserted in `flatten`).
 const PIECE_BIT: u32 = 1 << 30;
-
-impl<const W: usize> Default for Arrays<W> {
-    fn default() -> Self {
-        Arrays { nodes: Vec::new(), leaves: Vec::new(), groups: Vec::new(), ids: Vec::new(), spheres: Vec::new(), pieces: Vec::new() }
-    }
-}
 
 /// The interior children of wide nodes over more primitives than this are
 /// built in parallel, as pieces. At 2^15 the CBbunny (28k triangles) was
@@ -78,35 +113,25 @@ fn gather<'a, const W: usize>(l: BuildSet<'a>, r: BuildSet<'a>) -> Vec<Kid<'a>> 
     kids
 }
 
-impl<const W: usize> Arrays<W> {
-    /// Empty arrays with room for a subtree of `prims` triangles: the
-    /// block-counted SAH fills groups of 4 to about 3.8 triangles, and the
-    /// 8-wide tree of the 1M mesh has a node per 13 triangles. A subtree
-    /// large enough to be built in pieces holds only its top here, so it
-    /// gets no room in advance.
+impl<const W: usize> Part<W> {
+    /// An empty part with room for a subtree of `prims` primitives: the
+    /// 8-wide tree of the 1M mesh has a node per 13 triangles and a leaf
+    /// per 3.7. A subtree large enough to be built in pieces holds only its
+    /// top here, so it gets no room in advance.
     pub(super) fn with_room_for(prims: usize) -> Self {
         if prims > PARALLEL_BUILD {
-            return Arrays::default();
+            return Part::default();
         }
-        let groups = prims / 3 + 8;
-        Arrays {
-            nodes: Vec::with_capacity(prims / (W + 4) + 8),
-            leaves: Vec::new(),
-            groups: Vec::with_capacity(groups),
-            ids: Vec::with_capacity(groups * LANES),
-            spheres: Vec::new(),
-            pieces: Vec::new(),
-        }
+        Part { nodes: Vec::with_capacity(prims / (W + 4) + 8), leaves: Vec::with_capacity(prims / 3 + 8), ..Part::default() }
     }
 
     /// Build the subtree over `set` (primitives indexing `prims`), nodes
-    /// depth first, triangle groups in leaf order; returns its child code.
-    /// The layout does not depend on the thread count.
+    /// depth first, leaves recorded in order; returns its child code.
     pub(super) fn build(&mut self, set: BuildSet, prims: &PrimTable) -> u32 {
         let n = set.len();
         let (l, r) = match set.split() {
             Ok(sides) => sides,
-            Err(set) => return self.emit_leaf(prims, &set),
+            Err(set) => return self.leaf(prims, &set),
         };
         let kids = gather::<W>(l, r);
         let idx = self.push_node();
@@ -116,7 +141,7 @@ impl<const W: usize> Arrays<W> {
             for (lane, k) in kids.into_iter().enumerate() {
                 self.set_child(idx, lane, &k.set.bounds(), EMPTY);
                 if k.leaf {
-                    let code = self.emit_leaf(prims, &k.set);
+                    let code = self.leaf(prims, &k.set);
                     self.nodes[idx].child[lane] = code;
                 } else {
                     interior.push((lane, k.set));
@@ -125,9 +150,9 @@ impl<const W: usize> Arrays<W> {
             let built: Vec<(usize, Piece<W>)> = interior
                 .into_par_iter()
                 .map(|(lane, set)| {
-                    let mut arrays = Arrays::with_room_for(set.len());
-                    let root = arrays.build(set, prims);
-                    (lane, Piece { arrays, root })
+                    let mut part = Part::with_room_for(set.len());
+                    let root = part.build(set, prims);
+                    (lane, Piece { part, root })
                 })
                 .collect();
             for (lane, piece) in built {
@@ -146,7 +171,7 @@ impl<const W: usize> Arrays<W> {
 
     fn child(&mut self, k: Kid, prims: &PrimTable) -> u32 {
         if k.leaf {
-            self.emit_leaf(prims, &k.set)
+            self.leaf(prims, &k.set)
         } else {
             self.build(k.set, prims)
         }
@@ -166,77 +191,48 @@ impl<const W: usize> Arrays<W> {
         n.child[lane] = code;
     }
 
-    fn emit_leaf(&mut self, prims: &PrimTable, set: &BuildSet) -> u32 {
-        let mut buf = [0; MAX_LEAF];
-        let order = set.indices(&mut buf);
-        let group = self.groups.len() as u32;
-        let sphere = self.spheres.len() as u32;
-        let mut tris = order.iter().map(|&i| prims.get(i)).filter(|p| !p.is_sphere()).peekable();
-        while tris.peek().is_some() {
-            let mut g = TriGroup { v: [[[0.0; LANES]; 3]; 3] };
-            let mut first: Option<Prim> = None;
-            for lane in 0..LANES {
-                // Padding lanes repeat the group's first triangle; `ids` marks them empty.
-                let (p, real) = match tris.next() {
-                    Some(p) => (p, true),
-                    None => (first.expect("a group has a triangle"), false),
-                };
-                first.get_or_insert(p);
-                for k in 0..3 {
-                    for a in 0..3 {
-                        g.v[k][a][lane] = p.v[k][a];
-                    }
-                }
-                self.ids.push(if real { [p.geom_id(), p.prim_id] } else { [EMPTY, EMPTY] });
-            }
-            self.groups.push(g);
-        }
-        self.spheres.extend(order.iter().map(|&i| prims.get(i)).filter(|p| p.is_sphere()));
-        let leaf = Leaf { group, n_groups: self.groups.len() as u32 - group, sphere, n_spheres: self.spheres.len() as u32 - sphere };
-        if leaf.n_spheres == 0 && leaf.n_groups <= 3 && group < INLINE_GROUP_LIMIT {
-            return LEAF_BIT | INLINE_BIT | leaf.n_groups << 28 | group;
-        }
-        self.leaves.push(leaf);
-        assert!(self.leaves.len() < INLINE_BIT as usize, "too many leaf records");
+    /// Record `set` as a leaf; `flatten` writes it.
+    fn leaf(&mut self, prims: &PrimTable, set: &BuildSet) -> u32 {
+        let tris = set.indices().filter(|&i| !prims.is_sphere(i)).count();
+        let p = Pending { first: set.offset() as u32, count: set.len() as u8, tris: tris as u8 };
+        self.groups += p.groups();
+        self.spheres += p.spheres();
+        self.records += !p.inline() as u32;
+        self.leaves.push(p);
+        assert!(self.leaves.len() < PIECE_BIT as usize, "too many leaves");
         LEAF_BIT | (self.leaves.len() as u32 - 1)
     }
 }
 
-/// Where a piece's arrays go in the flattened ones.
+/// Where a piece's data go in the final arrays.
 #[derive(Clone, Copy, Default)]
 struct Base {
     nodes: u32,
-    leaves: u32,
+    records: u32,
     groups: u32,
     spheres: u32,
 }
 
-impl Base {
-    /// `code`, a child code of a piece placed at `self`, in the flattened
-    /// arrays; `pieces` are the final codes of the piece's own pieces.
-    fn fix(&self, code: u32, pieces: &[u32]) -> u32 {
-        if code == EMPTY {
-            code
-        } else if code & LEAF_BIT == 0 {
-            if code & PIECE_BIT != 0 {
-                pieces[(code & !PIECE_BIT) as usize]
-            } else {
-                code + self.nodes
-            }
-        } else if code & INLINE_BIT == 0 {
-            LEAF_BIT | ((code & !LEAF_BIT) + self.leaves)
-        } else {
-            code + self.groups
-        }
-    }
-}
-
-/// One piece's share of the flattening: its arrays, where they go, and
-/// the final codes of its own pieces.
+/// One piece's share of the flattening: its part, where it goes, and the
+/// final codes of its own pieces' roots.
 struct Placed<'a, const W: usize> {
-    arrays: &'a Arrays<W>,
+    part: &'a Part<W>,
     base: Base,
     pieces: Vec<u32>,
+}
+
+/// The final code of a piece's root `code`, placed at `base`: a node, or
+/// the piece's first (and only) leaf.
+fn root_code<const W: usize>(part: &Part<W>, code: u32, base: &Base, pieces: &[u32]) -> u32 {
+    if code & LEAF_BIT != 0 {
+        debug_assert_eq!(code & !LEAF_BIT, 0, "a piece whose root is a leaf has one leaf");
+        let p = part.leaves[0];
+        return if p.inline() { LEAF_BIT | INLINE_BIT | p.groups() << 28 | base.groups } else { LEAF_BIT | base.records };
+    }
+    if code & PIECE_BIT != 0 {
+        return pieces[(code & !PIECE_BIT) as usize];
+    }
+    code + base.nodes
 }
 
 /// Lay `pieces` (and theirs) out after `next`, depth first, each piece
@@ -246,25 +242,31 @@ fn place<'a, const W: usize>(pieces: &'a [Piece<W>], next: &mut Base, out: &mut 
         .iter()
         .map(|p| {
             let base = *next;
-            let a = &p.arrays;
+            let a = &p.part;
             next.nodes += a.nodes.len() as u32;
-            next.leaves += a.leaves.len() as u32;
-            next.groups += a.groups.len() as u32;
-            next.spheres += a.spheres.len() as u32;
+            next.records += a.records;
+            next.groups += a.groups;
+            next.spheres += a.spheres;
             let slot = out.len();
-            out.push(Placed { arrays: a, base, pieces: Vec::new() });
+            out.push(Placed { part: a, base, pieces: Vec::new() });
             out[slot].pieces = place(&a.pieces, next, out);
-            base.fix(p.root, &out[slot].pieces)
+            root_code(a, p.root, &base, &out[slot].pieces)
         })
         .collect()
 }
 
-/// The tree `root` (a piece of arrays and their pieces) as one set of
-/// arrays, every piece copied to its place in parallel.
-pub(super) fn flatten<const W: usize>(root: Piece<W>) -> (Arrays<W>, u32) {
-    if root.arrays.pieces.is_empty() {
-        return (root.arrays, root.root);
-    }
+/// Cut `n` elements off the front of `rest`.
+fn take<'a, T>(rest: &mut &'a mut [MaybeUninit<T>], n: usize) -> &'a mut [MaybeUninit<T>] {
+    let (head, tail) = std::mem::take(rest).split_at_mut(n);
+    *rest = tail;
+    head
+}
+
+/// The tree `root` as the final arrays: every piece placed depth first, its
+/// nodes copied and its leaves written, in parallel; returns them and the
+/// root's code. `refs` are the build's references, which the recorded
+/// leaves index.
+pub(super) fn flatten<const W: usize>(root: Piece<W>, refs: &[PrimRef], prims: &PrimTable) -> (Arrays<W>, u32) {
     let mut total = Base::default();
     let mut placed = Vec::new();
     let code = place(std::slice::from_ref(&root), &mut total, &mut placed)[0];
@@ -272,70 +274,112 @@ pub(super) fn flatten<const W: usize>(root: Piece<W>) -> (Arrays<W>, u32) {
     // Inline leaves hold their first group in 28 bits; 2^28 groups of 4
     // would be a billion triangles, far past what fits in memory here.
     assert!(total.groups < INLINE_GROUP_LIMIT, "too many triangle groups ({})", total.groups);
-    assert!(total.leaves < INLINE_BIT, "too many leaf records ({})", total.leaves);
+    assert!(total.records < INLINE_BIT, "too many leaf records ({})", total.records);
+    use crate::accel::huge::vec_with_capacity as huge;
     let mut out = Arrays::<W> {
-        nodes: crate::accel::huge::vec_with_capacity(total.nodes as usize),
-        leaves: Vec::with_capacity(total.leaves as usize),
-        groups: crate::accel::huge::vec_with_capacity(total.groups as usize),
-        ids: crate::accel::huge::vec_with_capacity(total.groups as usize * LANES),
+        nodes: huge(total.nodes as usize),
+        leaves: Vec::with_capacity(total.records as usize),
+        groups: huge(total.groups as usize),
+        ids: huge(total.groups as usize * LANES),
         spheres: Vec::with_capacity(total.spheres as usize),
-        pieces: Vec::new(),
     };
     {
         // Each piece's destination, cut from the arrays' spare room in order.
-        let (mut nodes, mut leaves, mut groups, mut ids, mut spheres) = (
-            &mut out.nodes.spare_capacity_mut()[..total.nodes as usize],
-            &mut out.leaves.spare_capacity_mut()[..total.leaves as usize],
-            &mut out.groups.spare_capacity_mut()[..total.groups as usize],
-            &mut out.ids.spare_capacity_mut()[..total.groups as usize * LANES],
-            &mut out.spheres.spare_capacity_mut()[..total.spheres as usize],
-        );
-        let mut jobs = Vec::with_capacity(placed.len());
-        for p in &placed {
-            let a = p.arrays;
-            let n;
-            let l;
-            let g;
-            let i;
-            let sp;
-            (n, nodes) = std::mem::take(&mut nodes).split_at_mut(a.nodes.len());
-            (l, leaves) = std::mem::take(&mut leaves).split_at_mut(a.leaves.len());
-            (g, groups) = std::mem::take(&mut groups).split_at_mut(a.groups.len());
-            (i, ids) = std::mem::take(&mut ids).split_at_mut(a.ids.len());
-            (sp, spheres) = std::mem::take(&mut spheres).split_at_mut(a.spheres.len());
-            jobs.push((p, n, l, g, i, sp));
-        }
-        jobs.into_par_iter().for_each(|(p, n, l, g, i, sp)| {
-            let (a, base) = (p.arrays, p.base);
-            for (dst, src) in n.iter_mut().zip(&a.nodes) {
+        let mut nodes = &mut out.nodes.spare_capacity_mut()[..total.nodes as usize];
+        let mut records = &mut out.leaves.spare_capacity_mut()[..total.records as usize];
+        let mut groups = &mut out.groups.spare_capacity_mut()[..total.groups as usize];
+        let mut ids = &mut out.ids.spare_capacity_mut()[..total.groups as usize * LANES];
+        let mut spheres = &mut out.spheres.spare_capacity_mut()[..total.spheres as usize];
+        let jobs: Vec<_> = placed
+            .iter()
+            .map(|p| {
+                let a = p.part;
+                let g = a.groups as usize;
+                (p, take(&mut nodes, a.nodes.len()), take(&mut records, a.records as usize), take(&mut groups, g), take(&mut ids, g * LANES), take(&mut spheres, a.spheres as usize))
+            })
+            .collect();
+        jobs.into_par_iter().for_each(|(p, nodes, records, groups, ids, spheres)| {
+            let codes = write_leaves(p, refs, prims, records, groups, ids, spheres);
+            let base = p.base;
+            for (dst, src) in nodes.iter_mut().zip(&p.part.nodes) {
                 let mut node = *src;
                 for c in node.child.iter_mut() {
-                    *c = base.fix(*c, &p.pieces);
+                    *c = if *c == EMPTY {
+                        EMPTY
+                    } else if *c & LEAF_BIT != 0 {
+                        codes[(*c & !LEAF_BIT) as usize]
+                    } else if *c & PIECE_BIT != 0 {
+                        p.pieces[(*c & !PIECE_BIT) as usize]
+                    } else {
+                        *c + base.nodes
+                    };
                 }
                 dst.write(node);
-            }
-            for (dst, src) in l.iter_mut().zip(&a.leaves) {
-                dst.write(Leaf { group: src.group + base.groups, sphere: src.sphere + base.spheres, ..*src });
-            }
-            for (dst, src) in g.iter_mut().zip(&a.groups) {
-                dst.write(*src);
-            }
-            for (dst, src) in i.iter_mut().zip(&a.ids) {
-                dst.write(*src);
-            }
-            for (dst, src) in sp.iter_mut().zip(&a.spheres) {
-                dst.write(*src);
             }
         });
     }
     // SAFETY: the jobs above wrote every element up to these lengths: the
-    // pieces' slices tile `0..total` of each array exactly.
+    // pieces' slices tile `0..total` of each array exactly, and each piece
+    // writes all of its nodes, records, groups (with their ids) and spheres.
     unsafe {
         out.nodes.set_len(total.nodes as usize);
-        out.leaves.set_len(total.leaves as usize);
+        out.leaves.set_len(total.records as usize);
         out.groups.set_len(total.groups as usize);
         out.ids.set_len(total.groups as usize * LANES);
         out.spheres.set_len(total.spheres as usize);
     }
     (out, code)
+}
+
+/// Write the leaves of piece `p` into its slices of the final arrays;
+/// returns their final child codes.
+#[allow(clippy::too_many_arguments)]
+fn write_leaves<const W: usize>(
+    p: &Placed<W>,
+    refs: &[PrimRef],
+    prims: &PrimTable,
+    records: &mut [MaybeUninit<Leaf>],
+    groups: &mut [MaybeUninit<TriGroup>],
+    ids: &mut [MaybeUninit<[u32; 2]>],
+    spheres: &mut [MaybeUninit<Prim>],
+) -> Vec<u32> {
+    let base = p.base;
+    let (mut g, mut r, mut s) = (0usize, 0usize, 0usize);
+    let mut codes = Vec::with_capacity(p.part.leaves.len());
+    for leaf in &p.part.leaves {
+        let run = &refs[leaf.first as usize..leaf.first as usize + leaf.count as usize];
+        let (group, sphere) = (base.groups + g as u32, base.spheres + s as u32);
+        let mut tris = run.iter().map(|x| prims.get(x.index())).filter(|q| !q.is_sphere()).peekable();
+        while let Some(first) = tris.peek().copied() {
+            let mut tg = TriGroup { v: [[[0.0; LANES]; 3]; 3] };
+            for lane in 0..LANES {
+                // Padding lanes repeat the group's first triangle; `ids` marks them empty.
+                let (q, real) = match tris.next() {
+                    Some(q) => (q, true),
+                    None => (first, false),
+                };
+                for k in 0..3 {
+                    for a in 0..3 {
+                        tg.v[k][a][lane] = q.v[k][a];
+                    }
+                }
+                ids[g * LANES + lane].write(if real { [q.geom_id(), q.prim_id] } else { [EMPTY, EMPTY] });
+            }
+            groups[g].write(tg);
+            g += 1;
+        }
+        for q in run.iter().map(|x| prims.get(x.index())).filter(|q| q.is_sphere()) {
+            spheres[s].write(q);
+            s += 1;
+        }
+        codes.push(if leaf.inline() {
+            LEAF_BIT | INLINE_BIT | leaf.groups() << 28 | group
+        } else {
+            records[r].write(Leaf { group, n_groups: leaf.groups(), sphere, n_spheres: leaf.spheres() });
+            r += 1;
+            LEAF_BIT | (base.records + r as u32 - 1)
+        });
+    }
+    debug_assert_eq!((g, r, s), (p.part.groups as usize, p.part.records as usize, p.part.spheres as usize));
+    codes
 }

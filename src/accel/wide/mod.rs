@@ -163,9 +163,9 @@ impl<const W: usize> WideBvh<W> {
         let (mut root, mut root_area) = (EMPTY, 0.0);
         if let Some(set) = BuildSet::root(&mut refs) {
             root_area = set.half_area() as f64;
-            out = Arrays::with_room_for(prims.len());
-            root = out.build(set, &prims);
-            (out, root) = layout::flatten(layout::Piece { arrays: out, root });
+            let mut part = layout::Part::with_room_for(prims.len());
+            let code = part.build(set, &prims);
+            (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, &prims);
         }
         let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), avx512: W == 8 && avx512_requested(), interleave: false };
         b.interleave = b.avx && b.memory_bytes() >= INTERLEAVE_BYTES;

@@ -331,6 +331,15 @@ fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
         let c = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.4 - 1.2;
         scene.shapes.push(Shape::Sphere { center: c, radius: 0.02 + 0.05 * rng.uniform() });
     }
+    // Small meshes far out: children of the root's wide node too small to
+    // split again, so they are built as pieces that are single leaves.
+    let mut targets = Vec::new();
+    for (k, c) in [Vec3::new(30.0, 1.0, 0.0), Vec3::new(-2.0, 35.0, 3.0), Vec3::new(1.0, -3.0, -40.0)].into_iter().enumerate() {
+        let positions = vec![c, c + Vec3::new(1.0, 0.0, 0.2), c + Vec3::new(0.0, 1.0, 0.1), c + Vec3::new(1.0, 1.0, 0.5)];
+        let triangles = if k == 0 { vec![[0, 1, 2]] } else { vec![[0, 1, 2], [1, 3, 2]] };
+        scene.shapes.push(Shape::Mesh(crate::scene::TriangleMesh { positions, triangles, normals: Vec::new() }));
+        targets.push(c + Vec3::new(0.3, 0.3, 0.1));
+    }
     let shapes = scene.shapes.clone();
     let in_pool = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
@@ -350,6 +359,10 @@ fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
     let brute = BruteForce::new(&shapes);
     let mut rays = camera_rays(&Camera::from_scene(&scene), 40, 30);
     rays.extend(random_rays(&scene, 1500, 11));
+    for t in &targets {
+        let o = *t + Vec3::new(0.2, -0.1, 4.0);
+        rays.extend((0..8).map(|i| Ray::new(o, *t + Vec3::new(0.02 * i as f32, 0.01 * i as f32, 0.0) - o)));
+    }
     let mut hits = vec![None; rays.len()];
     two.intersect_batch(&rays, &mut hits);
     let mut occ = vec![false; rays.len()];
@@ -358,4 +371,6 @@ fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
         assert_eq!(hits[i], brute.intersect(r), "ray {i}: closest hit");
         assert_eq!(occ[i], brute.occluded(r), "ray {i}: occlusion");
     }
+    let far_hits = hits[hits.len() - 24..].iter().filter(|h| h.is_some_and(|h| h.geom_id as usize >= shapes.len() - 3)).count();
+    assert!(far_hits >= 12, "only {far_hits} of 24 rays aimed at the far meshes hit them");
 }
