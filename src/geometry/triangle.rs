@@ -34,14 +34,20 @@ impl RayTransform {
         };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
+        // Indexed as an array: indexing a `Vec3` by a run-time axis (or
+        // picking with selects, which compiles the same) gives branches that
+        // random rays mispredict: 1 thread, random rays, Mrays/s, cow 10.1 ->
+        // 11.3, CBbunny 12.1 -> 13.3, 1M sphere 3.42 -> 3.59 (camera rays
+        // within 2 %).
+        let d = dir.to_array();
         // Keep the winding of the sheared triangle independent of the sign of dir[kz].
-        if dir[kz] < 0.0 {
+        if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
         // The three quotients in one SIMD division (each lane rounds exactly
         // as the scalar division would): ray setup is a measurable share of
         // a coherent ray's cost.
-        let s = glam::Vec3A::new(dir[kx], dir[ky], 1.0) / glam::Vec3A::splat(dir[kz]);
+        let s = glam::Vec3A::new(d[kx], d[ky], 1.0) / glam::Vec3A::splat(d[kz]);
         RayTransform { origin, kx, ky, kz, sx: s.x, sy: s.y, sz: s.z }
     }
 }
