@@ -75,9 +75,11 @@ pub fn intersect_triangle(
     tmax: f32,
 ) -> Option<(f32, f32, f32)> {
     let (kx, ky, kz) = (rt.kx, rt.ky, rt.kz);
-    let a = p0 - rt.origin;
-    let b = p1 - rt.origin;
-    let c = p2 - rt.origin;
+    // Arrays, not `Vec3`s: a `Vec3` indexed by a run-time axis compiles to
+    // branches, which rays of varying direction mispredict.
+    let a = (p0 - rt.origin).to_array();
+    let b = (p1 - rt.origin).to_array();
+    let c = (p2 - rt.origin).to_array();
     let ax = a[kx] - rt.sx * a[kz];
     let ay = a[ky] - rt.sy * a[kz];
     let bx = b[kx] - rt.sx * b[kz];
