@@ -77,3 +77,30 @@ fn batched_rendering_equals_ray_at_a_time() {
         assert_eq!(batched.rays, single.rays, "{what}: ray counts differ");
     }
 }
+
+/// Backends that claim `exact_barycentrics` (native, brute) return hits
+/// whose barycentrics describing the hit would recompute bit for bit, so
+/// the renderer may skip the recomputation and still render the image every
+/// backend renders.
+#[test]
+fn exact_barycentrics_claims_hold() {
+    use pathtracer::scene::interaction::Interaction;
+    for (sub, name) in [("sky", "CBbunny"), ("meshedit", "cow"), ("sky", "CBspheres_lambertian")] {
+        let scene = common::load(&common::scene_path(sub, name));
+        let mut rays = camera_rays(&Camera::from_scene(&scene), 80, 60);
+        rays.extend(random_rays(&scene, 5_000, 9));
+        for kind in [BackendKind::Native, BackendKind::Brute] {
+            let accel = common::build(kind, &scene.shapes);
+            assert!(accel.exact_barycentrics(), "{kind}: expected to claim exact barycentrics");
+            let mut checked = 0;
+            for r in &rays {
+                let Some(h) = accel.intersect(r) else { continue };
+                let (a, b) = (Interaction::new(&scene, r, &h), Interaction::with_barycentrics(&scene, r, &h, true));
+                let bits = |i: &Interaction| [i.p, i.ng, i.ns].map(|v| v.to_array().map(f32::to_bits));
+                assert_eq!(bits(&a), bits(&b), "{name} {kind}: trusting the hit's barycentrics changes the interaction");
+                checked += 1;
+            }
+            assert!(checked > 2000, "{name} {kind}: only {checked} hits");
+        }
+    }
+}

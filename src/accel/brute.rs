@@ -25,6 +25,10 @@ impl Traversal for BruteForce {
         "brute (no acceleration)".into()
     }
 
+    fn exact_barycentrics(&self) -> bool {
+        true
+    }
+
     fn memory_bytes(&self) -> usize {
         self.prims.len() * std::mem::size_of::<Prim>()
     }

@@ -69,6 +69,13 @@ pub trait Traversal: Send + Sync {
     /// Bytes of acceleration structure and primitive data owned by the backend.
     fn memory_bytes(&self) -> usize;
 
+    /// Whether every hit's `(t, u, v)` is exactly what
+    /// `geometry::intersect_triangle` gives for the ray (spheres aside), so
+    /// describing a hit need not recompute them (see `Interaction::new`).
+    fn exact_barycentrics(&self) -> bool {
+        false
+    }
+
     /// The tree's SAH cost as (node part, leaf part), counted as Embree's
     /// `verbose=2` statistics count it; `None` where the backend cannot say.
     fn sah_cost(&self) -> Option<(f64, f64)> {

@@ -53,7 +53,7 @@ pub(super) struct Vertex {
 impl PathTracer<'_> {
     fn trace(&self, ray: &Ray, rays: &mut u64) -> Option<Interaction> {
         *rays += 1;
-        self.accel.intersect(ray).map(|h| Interaction::new(self.scene, ray, &h))
+        self.accel.intersect(ray).map(|h| Interaction::with_barycentrics(self.scene, ray, &h, self.accel.exact_barycentrics()))
     }
 
     pub(super) fn vertex(&self, it: Interaction, wo: Vec3) -> Vertex {
@@ -114,7 +114,7 @@ impl Integrator for PathTracer<'_> {
         let m = self.max_depth;
         let counts = |bounce: u32| self.accumulate || bounce == m;
         let wo = -camera_ray.dir.normalize();
-        let Some(it) = hit.map(|h| Interaction::new(self.scene, camera_ray, &h)) else {
+        let Some(it) = hit.map(|h| Interaction::with_barycentrics(self.scene, camera_ray, &h, self.accel.exact_barycentrics())) else {
             return if counts(0) { self.lights.escaped(-wo) } else { Vec3::ZERO };
         };
         let mut l = if counts(0) { emitted(self.scene, &it, wo) } else { Vec3::ZERO };

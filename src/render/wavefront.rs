@@ -60,7 +60,7 @@ impl PathTracer<'_> {
             .map(|(ray, hit)| {
                 let wo = -ray.dir.normalize();
                 let mut p = Path { l: Vec3::ZERO, beta: Vec3::ONE, v: None, bounce: 1, terms: 0..0, counted: false, next: None };
-                match hit.map(|h| Interaction::new(self.scene, ray, &h)) {
+                match hit.map(|h| Interaction::with_barycentrics(self.scene, ray, &h, self.accel.exact_barycentrics())) {
                     None => {
                         if counts(0) {
                             p.l = self.lights.escaped(-wo);
@@ -121,7 +121,7 @@ impl PathTracer<'_> {
                 }
                 let Some((k, wi, pdf_b, beta_next)) = p.next else { continue };
                 let gather = p.counted && !self.hemisphere;
-                let Some(next) = found[k].map(|h| Interaction::new(self.scene, &closest[k], &h)) else {
+                let Some(next) = found[k].map(|h| Interaction::with_barycentrics(self.scene, &closest[k], &h, self.accel.exact_barycentrics())) else {
                     if gather {
                         p.l += beta_next * self.lights.escaped(wi) * self.bsdf_weight_escape(wi, pdf_b);
                     }
@@ -210,7 +210,7 @@ impl PathTracer<'_> {
                 }
                 Term::Hemisphere { ray, f, wi, cos } => {
                     let le = match found[ray] {
-                        Some(h) => emitted(self.scene, &Interaction::new(self.scene, &closest[ray], &h), -wi),
+                        Some(h) => emitted(self.scene, &Interaction::with_barycentrics(self.scene, &closest[ray], &h, self.accel.exact_barycentrics()), -wi),
                         None => self.lights.escaped(wi),
                     };
                     sum += f * le * cos / UNIFORM_HEMISPHERE_PDF;

@@ -28,6 +28,13 @@ pub struct Interaction {
 
 impl Interaction {
     pub fn new(scene: &Scene, ray: &Ray, hit: &Hit) -> Self {
+        Self::with_barycentrics(scene, ray, hit, false)
+    }
+
+    /// `new`, trusting the hit's barycentrics when `exact` (the backend's
+    /// `Traversal::exact_barycentrics`): recomputing them then gives the
+    /// same bits, at the cost of a triangle test per hit.
+    pub fn with_barycentrics(scene: &Scene, ray: &Ray, hit: &Hit, exact: bool) -> Self {
         let (p, ng, ns, magnitude) = match &scene.shapes[hit.geom_id as usize] {
             Shape::Mesh(m) => {
                 let tri = m.triangles[hit.prim_id as usize];
@@ -37,8 +44,12 @@ impl Interaction {
                 // own test makes shading depend only on (ray, primitive), so
                 // every backend renders the same image. If our test misses by
                 // an ulp at an edge, keep the backend's values.
-                let rt = RayTransform::new(ray.origin, ray.dir);
-                let (_, u, v) = intersect_triangle(&rt, a, b, c, ray.tmin, ray.tmax).unwrap_or((hit.t, hit.u, hit.v));
+                let (u, v) = if exact {
+                    (hit.u, hit.v)
+                } else {
+                    let rt = RayTransform::new(ray.origin, ray.dir);
+                    intersect_triangle(&rt, a, b, c, ray.tmin, ray.tmax).map_or((hit.u, hit.v), |(_, u, v)| (u, v))
+                };
                 let mag = magnitude(&[a, b, c]);
                 let (u, v) = away_from_edges(a, b, c, u, v, mag);
                 let w = 1.0 - u - v;

@@ -418,6 +418,11 @@ impl<const W: usize> Traversal for WideBvh<W> {
         "native"
     }
 
+    /// The SIMD kernels give `intersect_triangle`'s bits (unit-tested).
+    fn exact_barycentrics(&self) -> bool {
+        true
+    }
+
     fn sah_cost(&self) -> Option<(f64, f64)> {
         let sah = self.sah();
         Some((sah.nodes, sah.leaves))
