@@ -188,13 +188,18 @@ enum RayKind {
     Random,
 }
 
-/// Best-of-`reps` Mrays/s on `threads` threads, chunks of 4096 rays. Camera
-/// and shadow rays go through the coherent batch calls, random rays through
-/// the plain ones.
+/// Best-of-`reps` Mrays/s on `threads` threads, chunks of 4096 rays, after
+/// one untimed pass when `reps` > 1 (brute force's single long pass needs
+/// none). Camera and shadow rays go through the coherent batch calls,
+/// random rays through the plain ones. Without the warm-up pass, the first
+/// backend measured on the first scene often read a third low in all three
+/// timed passes (cow camera rays, 1 thread: 39-54 Mrays/s in four of seven
+/// runs, 65-66 in the others), as if the CPU were still clocking up.
 fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize, reps: usize) -> f64 {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
     let mut best = f64::INFINITY;
-    for _ in 0..reps {
+    let warm_up = (reps > 1) as usize;
+    for rep in 0..reps + warm_up {
         let start = Instant::now();
         pool.install(|| {
             rays.par_chunks(4096).for_each(|chunk| match kind {
@@ -215,7 +220,9 @@ fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize
                 }
             })
         });
-        best = best.min(start.elapsed().as_secs_f64());
+        if rep >= warm_up {
+            best = best.min(start.elapsed().as_secs_f64());
+        }
     }
     rays.len() as f64 / best / 1e6
 }
