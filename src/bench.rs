@@ -420,7 +420,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut md = String::new();
     let mut samples: Vec<Sample> = Vec::new();
     let _ = writeln!(md, "Machine: {}, {all} threads.\n", cpu_model());
-    let _ = writeln!(md, "Throughput in Mrays/s (best of 3; brute on a 1/32 subset). Threads: 1 and {all}. Build: best of {BUILD_REPS} builds on {all} threads.\n");
+    let _ = writeln!(md, "Throughput in Mrays/s (best of 3 passes after an untimed one; brute: one pass on a 1/32 subset). Threads: 1 and {all}. Build: best of {BUILD_REPS} builds on {all} threads.\n");
     let _ = writeln!(md, "| scene | prims | backend | build ms | MiB | B/prim | camera 1T | camera {all}T | shadow 1T | shadow {all}T | random 1T | random {all}T |");
     let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut render_rows = String::new();
