@@ -95,15 +95,20 @@ impl<'a> PrimTable<'a> {
     /// Primitive `i`.
     #[inline]
     pub fn get(&self, i: u32) -> Prim {
-        let g = self.starts.partition_point(|&s| s <= i) - 1;
+        let g = self.shape_of(i);
         self.of_shape(g, i - self.starts[g])
     }
 
     /// Whether primitive `i` is a sphere.
     #[inline]
     pub fn is_sphere(&self, i: u32) -> bool {
-        let g = self.starts.partition_point(|&s| s <= i) - 1;
-        matches!(self.shapes[g], Shape::Sphere { .. })
+        matches!(self.shapes[self.shape_of(i)], Shape::Sphere { .. })
+    }
+
+    /// The shape primitive `i` belongs to.
+    #[inline]
+    fn shape_of(&self, i: u32) -> usize {
+        self.starts.partition_point(|&s| s <= i) - 1
     }
 
     /// Primitive `j` of shape `g`.

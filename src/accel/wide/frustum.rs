@@ -229,13 +229,7 @@ impl<const W: usize> WideBvh<W> {
     /// The CPU must have AVX2 and AVX-512F (`self.avx512`); `W` must be 8.
     #[target_feature(enable = "avx2,avx512f")]
     pub(super) unsafe fn closest_coherent_avx512(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        let mut unused = [false; PACKET];
-        for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            match Frustum::new(r, false) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false, true>(&f, r, h, &mut unused),
-                _ => self.closest_all::<true>(r, h),
-            }
-        }
+        self.closest_packets::<true>(rays, hits)
     }
 
     /// `any_coherent_avx` with the AVX-512 packet kernels.
@@ -244,13 +238,7 @@ impl<const W: usize> WideBvh<W> {
     /// As `closest_coherent_avx512`.
     #[target_feature(enable = "avx2,avx512f")]
     pub(super) unsafe fn any_coherent_avx512(&self, rays: &[Ray], out: &mut [bool]) {
-        let mut unused = [None; PACKET];
-        for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
-            match Frustum::new(r, true) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true, true>(&f, r, &mut unused, o),
-                _ => self.any_all::<true>(r, o),
-            }
-        }
+        self.any_packets::<true>(rays, out)
     }
 
     /// `hits[i]` = the closest hit of `rays[i]`, packets of `PACKET` rays.
@@ -259,13 +247,7 @@ impl<const W: usize> WideBvh<W> {
     /// The CPU must have AVX2 (`self.avx`); `W` must be 8.
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_coherent_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        let mut unused = [false; PACKET];
-        for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            match Frustum::new(r, false) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false, false>(&f, r, h, &mut unused),
-                _ => self.closest_all::<true>(r, h),
-            }
-        }
+        self.closest_packets::<false>(rays, hits)
     }
 
     /// `out[i]` = whether `rays[i]` is occluded, packets of `PACKET` rays.
@@ -274,10 +256,30 @@ impl<const W: usize> WideBvh<W> {
     /// As `closest_coherent_avx`.
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn any_coherent_avx(&self, rays: &[Ray], out: &mut [bool]) {
+        self.any_packets::<false>(rays, out)
+    }
+
+    /// The coherent entry points' body, inlined into each so it is compiled
+    /// with its instruction set: packets as frusta where their rays allow,
+    /// else ray by ray.
+    #[inline(always)]
+    unsafe fn closest_packets<const WIDE: bool>(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        let mut unused = [false; PACKET];
+        for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            match Frustum::new(r, false) {
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false, WIDE>(&f, r, h, &mut unused),
+                _ => self.closest_all::<true>(r, h),
+            }
+        }
+    }
+
+    /// As `closest_packets`, for occlusion.
+    #[inline(always)]
+    unsafe fn any_packets<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool]) {
         let mut unused = [None; PACKET];
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             match Frustum::new(r, true) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true, false>(&f, r, &mut unused, o),
+                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true, WIDE>(&f, r, &mut unused, o),
                 _ => self.any_all::<true>(r, o),
             }
         }
@@ -466,26 +468,7 @@ impl<const W: usize> WideBvh<W> {
             } else {
                 intersect_group_x2(g, rt, sh, tmin, range, &mut out)
             };
-            for r in 0..2 {
-                let mut m = masks[r];
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if ids[lane][0] == EMPTY {
-                        continue;
-                    }
-                    if ANY {
-                        found[r] = true;
-                        break;
-                    }
-                    let l = out[r][lane];
-                    let h = Hit { t: l.t, u: l.u, v: l.v, geom_id: ids[lane][0], prim_id: ids[lane][1] };
-                    if closer(h, &hits[ij[r]]) {
-                        tmax[ij[r]] = h.t;
-                        hits[ij[r]] = Some(h);
-                    }
-                }
-            }
+            take_hits::<ANY, 2>(ij, masks, &out, ids, &mut found, tmax, hits);
             if ANY && found[0] && found[1] {
                 break;
             }
@@ -517,33 +500,50 @@ impl<const W: usize> WideBvh<W> {
             let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
             let mut out = [[LaneHit::default(); LANES]; 4];
             let masks = intersect_group_x4(g, rt, sh, tmin, range, &mut out);
-            for r in 0..4 {
-                if ANY && found[r] {
-                    continue;
-                }
-                let mut m = masks[r];
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if ids[lane][0] == EMPTY {
-                        continue;
-                    }
-                    if ANY {
-                        found[r] = true;
-                        break;
-                    }
-                    let l = out[r][lane];
-                    let h = Hit { t: l.t, u: l.u, v: l.v, geom_id: ids[lane][0], prim_id: ids[lane][1] };
-                    if closer(h, &hits[quad[r]]) {
-                        tmax[quad[r]] = h.t;
-                        hits[quad[r]] = Some(h);
-                    }
-                }
-            }
+            take_hits::<ANY, 4>(quad, masks, &out, ids, &mut found, tmax, hits);
             if ANY && found.iter().all(|&f| f) {
                 break;
             }
         }
         found
+    }
+}
+
+/// One triangle group's results for rays `which` (`masks[r]`, `out[r]`
+/// for ray `which[r]`, lanes identified by `ids`): with `ANY`, marks in
+/// `found` the rays that hit something (rays already found are skipped);
+/// else keeps each ray's closest hit by the tie rule and shortens its range.
+#[inline(always)]
+fn take_hits<const ANY: bool, const N: usize>(
+    which: [usize; N],
+    masks: [u32; N],
+    out: &[[LaneHit; LANES]; N],
+    ids: &[[u32; 2]],
+    found: &mut [bool; N],
+    tmax: &mut [f32; PACKET],
+    hits: &mut [Option<Hit>],
+) {
+    for r in 0..N {
+        if ANY && found[r] {
+            continue;
+        }
+        let mut m = masks[r];
+        while m != 0 {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if ids[lane][0] == EMPTY {
+                continue;
+            }
+            if ANY {
+                found[r] = true;
+                break;
+            }
+            let l = out[r][lane];
+            let h = Hit { t: l.t, u: l.u, v: l.v, geom_id: ids[lane][0], prim_id: ids[lane][1] };
+            if closer(h, &hits[which[r]]) {
+                tmax[which[r]] = h.t;
+                hits[which[r]] = Some(h);
+            }
+        }
     }
 }

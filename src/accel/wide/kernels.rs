@@ -201,36 +201,55 @@ pub(super) fn intersect_group(g: &TriGroup, rt: &RayTransform, sh: &Shear, tmin:
         let behind = _mm_or_ps(_mm_and_ps(_mm_cmpgt_ps(det, zero), _mm_cmple_ps(ts, zero)), _mm_and_ps(_mm_cmplt_ps(det, zero), _mm_cmpge_ps(ts, zero)));
         ok = _mm_andnot_ps(behind, ok);
         let mut mask = _mm_movemask_ps(ok) as u32 & !any_zero;
+        let mut tuv = [[0.0f32; LANES]; 3];
         if mask != 0 {
             let inv = _mm_div_ps(_mm_set1_ps(1.0), det);
             let t = _mm_mul_ps(ts, inv);
             let in_range = _mm_and_ps(_mm_cmpgt_ps(t, _mm_set1_ps(tmin)), _mm_cmple_ps(t, _mm_set1_ps(tmax)));
             mask &= _mm_movemask_ps(in_range) as u32;
-            let (mut tt, mut uu, mut vv) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-            _mm_storeu_ps(tt.as_mut_ptr(), t);
-            _mm_storeu_ps(uu.as_mut_ptr(), _mm_mul_ps(e1, inv));
-            _mm_storeu_ps(vv.as_mut_ptr(), _mm_mul_ps(e2, inv));
-            for lane in 0..LANES {
-                out[lane] = LaneHit { t: tt[lane], u: uu[lane], v: vv[lane] };
-            }
+            _mm_storeu_ps(tuv[0].as_mut_ptr(), t);
+            _mm_storeu_ps(tuv[1].as_mut_ptr(), _mm_mul_ps(e1, inv));
+            _mm_storeu_ps(tuv[2].as_mut_ptr(), _mm_mul_ps(e2, inv));
         }
-        // Lanes with an exact zero edge function: the scalar test decides (in f64).
-        let mut z = any_zero;
-        while z != 0 {
-            let lane = z.trailing_zeros() as usize;
-            z &= z - 1;
-            if let Some((t, u, v)) = scalar_lane(g, lane, rt, tmin, tmax) {
-                out[lane] = LaneHit { t, u, v };
-                mask |= 1 << lane;
-            }
-        }
-        mask
+        per_ray(g, [rt], [tmin], [tmax], mask, any_zero, &tuv, std::array::from_mut(out))[0]
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
         let _ = sh;
         intersect_group_scalar(g, rt, tmin, tmax, out)
     }
+}
+
+/// The SIMD triangle tests' common end, for `N` rays whose results sit
+/// in lanes `LANES * r ..` of the registers: each ray's mask, its lanes of
+/// `tuv` (`t`, `u`, `v` rows, stored when some lane hit) into `out[r]`,
+/// and lanes with an exact zero edge function (in `any_zero`) decided by
+/// the scalar test (in f64).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn per_ray<const N: usize, const L: usize>(g: &TriGroup, rt: [&RayTransform; N], tmin: [f32; N], tmax: [f32; N], mask: u32, any_zero: u32, tuv: &[[f32; L]; 3], out: &mut [[LaneHit; LANES]; N]) -> [u32; N] {
+    let lanes = (1u32 << LANES) - 1;
+    let mut masks = [0u32; N];
+    for r in 0..N {
+        masks[r] = (mask >> (LANES * r)) & lanes;
+        if mask != 0 {
+            for lane in 0..LANES {
+                let k = r * LANES + lane;
+                out[r][lane] = LaneHit { t: tuv[0][k], u: tuv[1][k], v: tuv[2][k] };
+            }
+        }
+        let mut z = (any_zero >> (LANES * r)) & lanes;
+        while z != 0 {
+            let lane = z.trailing_zeros() as usize;
+            z &= z - 1;
+            if let Some((t, u, v)) = scalar_lane(g, lane, rt[r], tmin[r], tmax[r]) {
+                out[r][lane] = LaneHit { t, u, v };
+                masks[r] |= 1 << lane;
+            }
+        }
+    }
+    masks
 }
 
 /// `intersect_group` one lane at a time with `intersect_triangle` itself,
@@ -311,36 +330,17 @@ pub(super) unsafe fn intersect_group_x2(g: &TriGroup, rt: [&RayTransform; 2], sh
     );
     ok = _mm256_andnot_ps(behind, ok);
     let mut mask = _mm256_movemask_ps(ok) as u32 & !any_zero;
+    let mut tuv = [[0.0f32; 2 * LANES]; 3];
     if mask != 0 {
         let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
         let t = _mm256_mul_ps(ts, inv);
         let in_range = _mm256_and_ps(gt(t, pair(tmin[0], tmin[1])), _mm256_cmp_ps::<_CMP_LE_OS>(t, pair(tmax[0], tmax[1])));
         mask &= _mm256_movemask_ps(in_range) as u32;
-        let (mut tt, mut uu, mut vv) = ([0.0f32; 2 * LANES], [0.0f32; 2 * LANES], [0.0f32; 2 * LANES]);
-        _mm256_storeu_ps(tt.as_mut_ptr(), t);
-        _mm256_storeu_ps(uu.as_mut_ptr(), _mm256_mul_ps(e1, inv));
-        _mm256_storeu_ps(vv.as_mut_ptr(), _mm256_mul_ps(e2, inv));
-        for r in 0..2 {
-            for lane in 0..LANES {
-                let k = r * LANES + lane;
-                out[r][lane] = LaneHit { t: tt[k], u: uu[k], v: vv[k] };
-            }
-        }
+        _mm256_storeu_ps(tuv[0].as_mut_ptr(), t);
+        _mm256_storeu_ps(tuv[1].as_mut_ptr(), _mm256_mul_ps(e1, inv));
+        _mm256_storeu_ps(tuv[2].as_mut_ptr(), _mm256_mul_ps(e2, inv));
     }
-    let mut masks = [mask & 0xf, mask >> 4];
-    // Lanes with an exact zero edge function: the scalar test decides (in f64).
-    for r in 0..2 {
-        let mut z = (any_zero >> (4 * r)) & 0xf;
-        while z != 0 {
-            let lane = z.trailing_zeros() as usize;
-            z &= z - 1;
-            if let Some((t, u, v)) = scalar_lane(g, lane, rt[r], tmin[r], tmax[r]) {
-                out[r][lane] = LaneHit { t, u, v };
-                masks[r] |= 1 << lane;
-            }
-        }
-    }
-    masks
+    per_ray(g, rt, tmin, tmax, mask, any_zero, &tuv, out)
 }
 
 /// `intersect_group` for four rays at once, ray `r` in the 128-bit lane `r`
@@ -399,34 +399,15 @@ pub(super) unsafe fn intersect_group_x4(g: &TriGroup, rt: [&RayTransform; 4], sh
     let behind = (gt(det, zero) & _mm512_cmp_ps_mask::<_CMP_LE_OS>(ts, zero)) | (lt(det, zero) & _mm512_cmp_ps_mask::<_CMP_GE_OS>(ts, zero));
     ok &= !behind;
     let mut mask = (ok & !any_zero) as u32;
+    let mut tuv = [[0.0f32; 4 * LANES]; 3];
     if mask != 0 {
         let inv = _mm512_div_ps(_mm512_set1_ps(1.0), det);
         let t = _mm512_mul_ps(ts, inv);
         let in_range = gt(t, each(&|r| tmin[r])) & _mm512_cmp_ps_mask::<_CMP_LE_OS>(t, each(&|r| tmax[r]));
         mask &= in_range as u32;
-        let (mut tt, mut uu, mut vv) = ([0.0f32; 4 * LANES], [0.0f32; 4 * LANES], [0.0f32; 4 * LANES]);
-        _mm512_storeu_ps(tt.as_mut_ptr(), t);
-        _mm512_storeu_ps(uu.as_mut_ptr(), _mm512_mul_ps(e1, inv));
-        _mm512_storeu_ps(vv.as_mut_ptr(), _mm512_mul_ps(e2, inv));
-        for r in 0..4 {
-            for lane in 0..LANES {
-                let k = r * LANES + lane;
-                out[r][lane] = LaneHit { t: tt[k], u: uu[k], v: vv[k] };
-            }
-        }
+        _mm512_storeu_ps(tuv[0].as_mut_ptr(), t);
+        _mm512_storeu_ps(tuv[1].as_mut_ptr(), _mm512_mul_ps(e1, inv));
+        _mm512_storeu_ps(tuv[2].as_mut_ptr(), _mm512_mul_ps(e2, inv));
     }
-    let mut masks = [0, 1, 2, 3].map(|r| (mask >> (4 * r)) & 0xf);
-    // Lanes with an exact zero edge function: the scalar test decides (in f64).
-    for r in 0..4 {
-        let mut z = ((any_zero as u32) >> (4 * r)) & 0xf;
-        while z != 0 {
-            let lane = z.trailing_zeros() as usize;
-            z &= z - 1;
-            if let Some((t, u, v)) = scalar_lane(g, lane, rt[r], tmin[r], tmax[r]) {
-                out[r][lane] = LaneHit { t, u, v };
-                masks[r] |= 1 << lane;
-            }
-        }
-    }
-    masks
+    per_ray(g, rt, tmin, tmax, mask, any_zero as u32, &tuv, out)
 }
