@@ -133,6 +133,30 @@ impl Camera {
         Ray::with_range(self.pos, (self.c2w * p).normalize(), self.near, self.far)
     }
 
+    /// CS184's thin lens (`-b`, `-d`): the ray through normalised image
+    /// coordinates `(x, y)` and the lens point picked by `u`. The lens is a
+    /// disk of radius `lens_radius` at the camera, sampled uniformly (radius
+    /// √u.0, angle 2π u.1); the plane in focus is z = −`focal_distance` in
+    /// camera space, where the pinhole ray through the same pixel meets it.
+    #[inline]
+    pub fn generate_ray_thin_lens(&self, x: f32, y: f32, u: (f32, f32)) -> Ray {
+        let p = Vec3::new(
+            (2.0 * x - 1.0) * (self.hfov_deg.to_radians() / 2.0).tan(),
+            (2.0 * y - 1.0) * (self.vfov_deg.to_radians() / 2.0).tan(),
+            -1.0,
+        );
+        let r = self.lens_radius * u.0.sqrt();
+        let phi = 2.0 * std::f32::consts::PI * u.1;
+        let lens = Vec3::new(r * phi.cos(), r * phi.sin(), 0.0);
+        let focus = p * self.focal_distance;
+        Ray::with_range(self.pos + self.c2w * lens, (self.c2w * (focus - lens)).normalize(), self.near, self.far)
+    }
+
+    /// Whether rays come from a lens (`-b` > 0) rather than a pinhole.
+    pub fn has_lens(&self) -> bool {
+        self.lens_radius > 0.0
+    }
+
     /// CS184's camera settings file (`Camera::dump_settings`), six lines.
     pub fn to_settings(&self) -> String {
         let m = self.c2w;
@@ -217,6 +241,30 @@ mod tests {
         let mut c = cam.clone();
         c.set_screen_size(480, 360);
         assert!((c.hfov_deg - 30.67).abs() < 0.01 && (c.vfov_deg - 23.25).abs() < 0.01, "{} {}", c.hfov_deg, c.vfov_deg);
+    }
+
+    #[test]
+    fn thin_lens_rays_meet_the_pinhole_ray_on_the_focal_plane() {
+        let scene = builtin::load().unwrap();
+        let mut cam = Camera::from_scene(&scene);
+        cam.lens_radius = 0.3;
+        cam.focal_distance = 3.5;
+        let axis = -cam.c2w.z_axis;
+        for (x, y) in [(0.5, 0.5), (0.1, 0.8), (0.93, 0.2)] {
+            let pin = cam.generate_ray(x, y);
+            let t = 3.5 / pin.dir.dot(axis);
+            let on_plane = pin.origin + pin.dir * t;
+            for u in [(0.0, 0.0), (0.999, 0.25), (0.5, 0.7), (0.2, 0.99)] {
+                let r = cam.generate_ray_thin_lens(x, y, u);
+                let off = (r.origin - cam.pos).length();
+                assert!(off <= 0.3 * 1.0001 && (r.origin - cam.pos).dot(axis).abs() < 1e-5, "origin off the lens: {off}");
+                let t = (on_plane - r.origin).dot(axis) / r.dir.dot(axis);
+                assert!((r.origin + r.dir * t - on_plane).length() < 1e-4, "{x},{y} {u:?}");
+            }
+        }
+        // The lens centre is the pinhole.
+        let (a, b) = (cam.generate_ray(0.3, 0.6), cam.generate_ray_thin_lens(0.3, 0.6, (0.0, 0.0)));
+        assert!((a.dir - b.dir).length() < 1e-6 && a.origin == b.origin);
     }
 
     #[test]

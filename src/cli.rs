@@ -102,6 +102,15 @@ pub struct RenderArgs {
     /// Render only the cell at X,Y (from the bottom-left) of size DX x DY
     #[arg(short = 'p', num_args = 4, value_names = ["X", "Y", "DX", "DY"], allow_negative_numbers = true)]
     pub cell: Option<Vec<String>>,
+    /// Environment light: a latitude-longitude OpenEXR map (CS184's -e)
+    #[arg(short = 'e', value_name = "FILE.exr")]
+    pub environment: Option<PathBuf>,
+    /// Thin-lens radius in scene units; 0 is a pinhole [default: 0]
+    #[arg(short = 'b', value_name = "RADIUS", allow_negative_numbers = true)]
+    pub lens_radius: Option<String>,
+    /// Focal distance: the plane in focus, in scene units along the view axis [default: 4.7]
+    #[arg(short = 'd', value_name = "DIST", allow_negative_numbers = true)]
+    pub focal_distance: Option<String>,
     /// Ray traversal backend
     #[arg(long, value_enum, default_value_t = BackendKind::Native)]
     pub backend: BackendKind,
@@ -237,6 +246,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             (a.accumulate.is_some(), "-o"),
             (a.hemisphere, "-H"),
             (a.no_rr, "--no-rr"),
+            (a.environment.is_some(), "-e"),
         ];
         if let Some((_, flag)) = lighting_flags.iter().find(|(used, _)| *used) {
             crate::bail!("{flag} applies to light transport; it has no effect with --integrator {}", a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default());
@@ -255,10 +265,12 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         Some(v) if v == 0 || v == 1 => v == 1,
         Some(v) => crate::bail!("-o {v}: expected 0 (only bounce m) or 1 (accumulate)"),
     };
+    lens_flags(a)?;
     let threads = init_threads(a.threads)?;
 
     let scene = load_scene(a.scene.as_deref())?;
     let camera = setup_camera(a, &scene, width, height)?;
+    let env = load_environment(a)?;
     let output = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
     if let Some(p) = &a.write_camera {
         image_io::write_text(p, &camera.to_settings())?;
@@ -267,12 +279,12 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let lights = match a.integrator {
         IntegratorKind::Path => {
             check_materials(&scene)?;
-            let l = Lights::from_scene(&scene)?;
+            let l = Lights::with_environment(&scene, env)?;
             for note in &l.notes {
                 println!("{}: {note}", scene.name);
             }
             if l.lights.is_empty() {
-                println!("{}: warning: the scene has no lights; the image will be black", scene.name);
+                println!("{}: warning: the scene has no light; the image will be black (an environment map, -e FILE.exr, would light it)", scene.name);
             }
             l
         }
@@ -339,6 +351,31 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// `-b` and `-d`, checked.
+fn lens_flags(a: &RenderArgs) -> Result<(Option<f32>, Option<f32>)> {
+    let parse = |v: &Option<String>, flag: &str| -> Result<Option<f32>> {
+        v.as_ref().map(|s| s.parse::<f32>().map_err(|_| Error::new(format!("{flag}: '{s}' is not a number")))).transpose()
+    };
+    let b = parse(&a.lens_radius, "-b")?;
+    let d = parse(&a.focal_distance, "-d")?;
+    if let Some(b) = b {
+        if !(b >= 0.0 && b.is_finite()) {
+            crate::bail!("-b {b}: the lens radius must be a finite number >= 0");
+        }
+    }
+    if let Some(d) = d {
+        if !(d > 0.0 && d.is_finite()) {
+            crate::bail!("-d {d}: the focal distance must be a finite number > 0");
+        }
+    }
+    Ok((b, d))
+}
+
+/// The environment map of `-e`, loaded and tabulated for sampling.
+fn load_environment(a: &RenderArgs) -> Result<Option<std::sync::Arc<crate::light::EnvMap>>> {
+    a.environment.as_deref().map(|p| crate::light::EnvMap::load(p).map(std::sync::Arc::new)).transpose()
+}
+
 /// The frame size from `-r` (800x600 without it).
 fn frame_size(a: &RenderArgs) -> Result<(u32, u32)> {
     match &a.resolution {
@@ -369,6 +406,14 @@ fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32) -> Resul
         camera.screen_w = width;
         camera.screen_h = height;
     }
+    // -b and -d on the command line win over a camera file's values.
+    let (b, d) = lens_flags(a)?;
+    if let Some(b) = b {
+        camera.lens_radius = b;
+    }
+    if let Some(d) = d {
+        camera.focal_distance = d;
+    }
     Ok(camera)
 }
 
@@ -377,7 +422,7 @@ fn run_export(a: &RenderArgs, out: &Path) -> Result<()> {
     let scene = load_scene(a.scene.as_deref())?;
     check_materials(&scene)?;
     let camera = setup_camera(a, &scene, width, height)?;
-    let lights = Lights::from_scene(&scene)?;
+    let lights = Lights::with_environment(&scene, load_environment(a)?)?;
     crate::export::export(&scene, &camera, &lights, out)?;
     println!("{}: exported {} shapes and {} lights to {}", scene.name, scene.shapes.len(), lights.lights.len(), out.display());
     Ok(())
@@ -400,19 +445,32 @@ fn compare(reference: &Path, images: &[PathBuf]) -> Result<()> {
     Ok(())
 }
 
-/// The path integrator renders diffuse and emissive materials; anything else
-/// is refused by name rather than approximated.
+/// The path integrator renders every CGL material with the parameters the
+/// shipped scenes use; anything else (rough glass or refraction, values
+/// outside a model's domain) is refused by name rather than approximated.
 pub fn check_materials(scene: &Scene) -> Result<()> {
     for obj in &scene.objects {
         let m = &scene.materials[obj.material];
-        if !matches!(m.bsdf, Bsdf::Diffuse { .. } | Bsdf::Emission { .. }) {
-            crate::bail!(
-                "{}: object '{}' uses material '{}' ({}), which the path integrator does not support yet (supported: diffuse, emission)",
-                scene.source,
-                obj.name,
-                m.name,
-                m.bsdf.kind()
-            );
+        let refuse = |why: String| -> Result<()> {
+            crate::bail!("{}: object '{}' uses material '{}' ({}): {why}", scene.source, obj.name, m.name, m.bsdf.kind())
+        };
+        let colour_ok = |c: glam::Vec3| c.is_finite() && c.min_element() >= 0.0;
+        match m.bsdf {
+            Bsdf::Diffuse { albedo } if !colour_ok(albedo) => refuse(format!("diffuse colour {albedo} must be finite and non-negative"))?,
+            Bsdf::Mirror { reflectance } if !colour_ok(reflectance) => refuse(format!("reflectance {reflectance} must be finite and non-negative"))?,
+            Bsdf::Glass { roughness, .. } | Bsdf::Refraction { roughness, .. } if roughness != 0.0 => {
+                refuse(format!("roughness {roughness} is not supported: only smooth (roughness 0) dielectrics are modelled, as in every CS184 scene"))?
+            }
+            Bsdf::Glass { ior, reflectance, transmittance, .. } if !(ior > 0.0 && ior.is_finite() && colour_ok(reflectance) && colour_ok(transmittance)) => {
+                refuse(format!("ior {ior}, reflectance {reflectance}, transmittance {transmittance}: the ior must be positive and the colours non-negative"))?
+            }
+            Bsdf::Refraction { ior, transmittance, .. } if !(ior > 0.0 && ior.is_finite() && colour_ok(transmittance)) => {
+                refuse(format!("ior {ior}, transmittance {transmittance}: the ior must be positive and the colour non-negative"))?
+            }
+            Bsdf::Microfacet { alpha, eta, k } if !(alpha > 0.0 && alpha.is_finite() && colour_ok(eta) && colour_ok(k)) => {
+                refuse(format!("alpha {alpha}, eta {eta}, k {k}: alpha must be positive and eta, k non-negative"))?
+            }
+            _ => {}
         }
     }
     Ok(())

@@ -22,10 +22,27 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
     let mut shapes = Vec::new();
     for (id, (shape, obj)) in scene.shapes.iter().zip(&scene.objects).enumerate() {
         let m = &scene.materials[obj.material];
-        let albedo = match m.bsdf {
-            Bsdf::Diffuse { albedo } => albedo,
-            Bsdf::Emission { .. } => glam::Vec3::ZERO,
-            ref other => crate::bail!("{}: material '{}' ({}) cannot be exported: only diffuse and emission are supported", scene.source, m.name, other.kind()),
+        // `albedo` stays the diffuse colour (0 for everything else), so
+        // exporters that know only diffuse surfaces can refuse the rest by `bsdf`.
+        let (albedo, bsdf) = match m.bsdf {
+            Bsdf::Diffuse { albedo } => (albedo, json!({"type": "diffuse", "albedo": v3(albedo), "two_sided": true})),
+            Bsdf::Emission { .. } => (glam::Vec3::ZERO, json!({"type": "emission"})),
+            Bsdf::Mirror { reflectance } => (glam::Vec3::ZERO, json!({"type": "mirror", "reflectance": v3(reflectance), "two_sided": true})),
+            Bsdf::Glass { reflectance, transmittance, ior, roughness } => (
+                glam::Vec3::ZERO,
+                json!({"type": "glass", "reflectance": v3(reflectance), "transmittance": v3(transmittance), "ior": ior, "roughness": roughness,
+                       "fresnel": "exact dielectric", "radiance_scale": "(eta_i/eta_t)^2 on transmission"}),
+            ),
+            Bsdf::Refraction { transmittance, ior, roughness } => (
+                glam::Vec3::ZERO,
+                json!({"type": "refraction", "transmittance": v3(transmittance), "ior": ior, "roughness": roughness,
+                       "fresnel": "none (everything transmitted, total internal reflection absorbs)", "radiance_scale": "(eta_i/eta_t)^2"}),
+            ),
+            Bsdf::Microfacet { alpha, eta, k } => (
+                glam::Vec3::ZERO,
+                json!({"type": "microfacet", "distribution": "beckmann", "alpha": alpha, "eta": v3(eta), "k": v3(k),
+                       "masking": "height-correlated Smith, exact Beckmann lambda", "fresnel": "exact conductor at wi.h", "two_sided": false}),
+            ),
         };
         let mut entry = json!({
             "id": id,
@@ -34,6 +51,7 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
             // Diffuse reflection from both sides; emission from the side the
             // geometric normal (triangle winding, sphere outward) points to.
             "albedo": v3(albedo),
+            "bsdf": bsdf,
             "emission": v3(m.emission),
             "bsdf_two_sided": true,
             "emission_one_sided": true,
@@ -76,6 +94,15 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
             Light::Rect { corner, ex, ey, normal, radiance } => {
                 json!({"type": "rect", "corner": v3(*corner), "ex": v3(*ex), "ey": v3(*ey), "normal": v3(*normal), "radiance": v3(*radiance), "visible": false})
             }
+            Light::Environment(e) => {
+                // Our texels (negative ones already clamped) in a lossless
+                // file of our own: the references see exactly what we see.
+                let img = crate::image_io::Rgb { width: e.width as u32, height: e.height as u32, pixels: e.texels.clone() };
+                crate::image_io::write_exr(&dir.join("environment.exr"), &img)?;
+                json!({"type": "environment", "file": "environment.exr", "source": e.path, "width": e.width, "height": e.height,
+                       "mapping": "cs184 lat-long: theta = acos(d.y) from row 0 at the top, phi = atan2(-d.z, d.x) + pi, u = phi/2pi; texel centres at half-integers",
+                       "filter": "bilinear, wrapping in u, clamped in v"})
+            }
             // Emissive shapes are described with the shape itself.
             Light::Mesh { .. } | Light::Sphere { .. } => json!({"type": "emissive_shape", "shape": lights.of_geometry.iter().position(|g| *g == Some(k))}),
         });
@@ -99,6 +126,10 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
             "near": camera.near,
             "far": camera.far,
             "pixel_filter": "box, 1 pixel",
+            // Thin lens (CS184): a disk of this radius at the camera, the
+            // plane in focus at this distance along the view axis; 0 = pinhole.
+            "lens_radius": camera.lens_radius,
+            "focal_distance": camera.focal_distance,
         },
         "shapes": shapes,
         "lights": light_list,

@@ -3,6 +3,7 @@
 
 pub mod accel;
 pub mod bench;
+pub mod bsdf;
 pub mod camera;
 pub mod cli;
 pub mod error;

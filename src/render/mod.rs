@@ -186,7 +186,10 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         for &i in &active {
             let p = &mut px[i];
             let (jx, jy) = if s.spp == 1 { (0.5, 0.5) } else { p.rng.uniform2() };
-            batch.push(camera.generate_ray((p.x as f32 + jx) / w, (p.y as f32 + jy) / h));
+            let (x, y) = ((p.x as f32 + jx) / w, (p.y as f32 + jy) / h);
+            // A pinhole draws nothing more: `-b 0` images are those of a
+            // camera without a lens, bit for bit.
+            batch.push(if camera.has_lens() { camera.generate_ray_thin_lens(x, y, p.rng.uniform2()) } else { camera.generate_ray(x, y) });
         }
         hits.clear();
         hits.resize(batch.len(), None);

@@ -17,13 +17,20 @@
 //! hit by a ray, so `-H` still samples them explicitly; everything a ray can
 //! hit (emissive surfaces, the hemisphere light) is found by the hemisphere
 //! samples. Both modes therefore estimate the same integral.
+//!
+//! Delta BSDFs (mirror, glass, refraction) cannot use light sampling: their
+//! vertices skip it, and the emitter (or environment) their sampled ray
+//! finds is counted with weight 1, in either mode. With `-m 1` a mirror
+//! therefore shows the light it reflects (CS184 renders it black there).
 
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
+use crate::bsdf::Bsdf;
 use crate::light::{emitted, Lights};
 use crate::ray::Ray;
 use crate::rng::Rng;
-use crate::scene::{Bsdf, Interaction, Scene};
+use crate::sampling::Frame;
+use crate::scene::{Interaction, Scene};
 use glam::Vec3;
 
 pub struct PathTracer<'a> {
@@ -47,7 +54,11 @@ pub(super) struct Vertex {
     /// Geometric and shading normals on the side of `wo`.
     pub ng: Vec3,
     pub ns: Vec3,
-    pub albedo: Vec3,
+    /// The shading frame (z = `ns`) and `wo` in it.
+    pub frame: Frame,
+    pub wo: Vec3,
+    /// What the surface does with light; `None` where it does not scatter.
+    pub bsdf: Option<Bsdf>,
 }
 
 impl PathTracer<'_> {
@@ -57,36 +68,42 @@ impl PathTracer<'_> {
     }
 
     pub(super) fn vertex(&self, it: Interaction, wo: Vec3) -> Vertex {
-        let flip = if it.ng.dot(wo) < 0.0 { -1.0 } else { 1.0 };
+        // `wo` on the side the geometric normal points to: outside.
+        let front = it.ng.dot(wo) >= 0.0;
+        let flip = if front { 1.0 } else { -1.0 };
         let ng = it.ng * flip;
         let mut ns = it.ns * flip;
         if ns.dot(ng) <= 0.0 {
             ns = ng; // an interpolated normal turned past the face: use the face's
         }
-        let albedo = match self.scene.material_of(it.geom_id).bsdf {
-            Bsdf::Diffuse { albedo } => albedo,
-            // Emitters do not reflect (CS184's EmissionBSDF has f = 0).
-            _ => Vec3::ZERO,
-        };
-        Vertex { it, ng, ns, albedo }
+        let frame = Frame::new(ns);
+        let bsdf = Bsdf::of(&self.scene.material_of(it.geom_id).bsdf, front);
+        Vertex { it, ng, ns, frame, wo: frame.to_local(wo), bsdf }
     }
 
-    /// MIS weight of the BSDF sample `wi` (pdf `pdf_b`) that reached the
-    /// emitter surface at `hit`, seen from `v`.
-    pub(super) fn bsdf_weight_hit(&self, v: &Vertex, hit: &Interaction, pdf_b: f32) -> f32 {
+    /// MIS weight of the BSDF sample `c` that reached the emitter surface
+    /// at `hit`, seen from `v`. Delta samples have weight 1: light sampling
+    /// cannot find what they find.
+    pub(super) fn bsdf_weight_hit(&self, v: &Vertex, hit: &Interaction, c: &Continuation) -> f32 {
+        if c.delta {
+            return 1.0;
+        }
         match self.lights.of_geometry[hit.geom_id as usize] {
             Some(k) => {
                 let pl = self.lights.lights[k].pdf_hit(v.it.p, hit.p, hit.ng);
-                power_heuristic(pdf_b, self.light_samples as f32 * pl)
+                power_heuristic(c.pdf, self.light_samples as f32 * pl)
             }
             None => 1.0,
         }
     }
 
-    /// MIS weight of a BSDF sample that escaped along `wi`.
-    pub(super) fn bsdf_weight_escape(&self, wi: Vec3, pdf_b: f32) -> f32 {
-        let pl: f32 = self.lights.lights.iter().map(|l| l.pdf_escape(wi)).sum();
-        power_heuristic(pdf_b, self.light_samples as f32 * pl)
+    /// MIS weight of a BSDF sample that escaped along `c.wi`.
+    pub(super) fn bsdf_weight_escape(&self, c: &Continuation) -> f32 {
+        if c.delta {
+            return 1.0;
+        }
+        let pl: f32 = self.lights.lights.iter().map(|l| l.pdf_escape(c.wi)).sum();
+        power_heuristic(c.pdf, self.light_samples as f32 * pl)
     }
 
     /// Direct light reflected at `v` towards the previous vertex: the
@@ -131,31 +148,44 @@ impl Integrator for PathTracer<'_> {
             }
             // With MIS the last vertex still needs its BSDF sample: the light
             // it finds is part of this bounce's direct light.
-            let Some((wi, pdf_b, beta_next)) = self.continuation(&v, bounce, count, beta, rng) else { break };
+            let Some(c) = self.continuation(&v, bounce, count, beta, rng) else { break };
             let last = bounce == m;
-            let ray = v.it.spawn_ray(wi);
-            let gather = count && !self.hemisphere;
+            let ray = v.it.spawn_ray(c.wi);
+            let gather = count && (!self.hemisphere || c.delta);
             let Some(next) = self.trace(&ray, rays) else {
                 if gather {
-                    l += beta_next * self.lights.escaped(wi) * self.bsdf_weight_escape(wi, pdf_b);
+                    l += c.beta * self.lights.escaped(c.wi) * self.bsdf_weight_escape(&c);
                 }
                 break;
             };
             if gather {
-                let le = emitted(self.scene, &next, -wi);
+                let le = emitted(self.scene, &next, -c.wi);
                 if le != Vec3::ZERO {
-                    l += beta_next * le * self.bsdf_weight_hit(&v, &next, pdf_b);
+                    l += c.beta * le * self.bsdf_weight_hit(&v, &next, &c);
                 }
             }
             if last {
                 break;
             }
-            v = self.vertex(next, -wi);
-            beta = beta_next;
+            v = self.vertex(next, -c.wi);
+            beta = c.beta;
             bounce += 1;
         }
         l
     }
+}
+
+/// The ray that continues a path past a vertex.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Continuation {
+    /// World direction.
+    pub wi: Vec3,
+    /// Its solid-angle pdf (for a delta lobe, the lobe's probability).
+    pub pdf: f32,
+    /// The path throughput past the vertex (Russian roulette included).
+    pub beta: Vec3,
+    /// Sampled from a delta lobe.
+    pub delta: bool,
 }
 
 /// Veach's power heuristic (beta = 2) for a sample of pdf `a` against `b`,

@@ -11,15 +11,14 @@
 //! is bit-identical: batching changes which rays travel together, never the
 //! image.
 
-use super::path::{PathTracer, Vertex};
+use super::path::{Continuation, PathTracer, Vertex};
 use crate::accel::Hit;
 use crate::light::{emitted, Target};
 use crate::ray::Ray;
 use crate::rng::Rng;
-use crate::sampling::{cosine_hemisphere, cosine_hemisphere_pdf, uniform_hemisphere, Frame, UNIFORM_HEMISPHERE_PDF};
+use crate::sampling::{uniform_hemisphere, UNIFORM_HEMISPHERE_PDF};
 use crate::scene::Interaction;
 use glam::Vec3;
-use std::f32::consts::PI;
 
 /// One term of a vertex's direct-light estimate, in the order the
 /// path-at-a-time code adds them.
@@ -43,9 +42,9 @@ struct Path {
     /// a range of the bounce's shared term buffer.
     terms: std::ops::Range<usize>,
     counted: bool,
-    /// The continuation: its ray (index in the closest-hit batch), sampled
-    /// direction, pdf and throughput, or `None` when the path ends here.
-    next: Option<(usize, Vec3, f32, Vec3)>,
+    /// The continuation and its ray's index in the closest-hit batch, or
+    /// `None` when the path ends here.
+    next: Option<(usize, Continuation)>,
 }
 
 impl PathTracer<'_> {
@@ -97,9 +96,9 @@ impl PathTracer<'_> {
                     self.direct_terms(v, rng, &mut terms, &mut shadow, &mut closest);
                 }
                 p.terms = first..terms.len();
-                p.next = self.continuation(v, p.bounce, p.counted, p.beta, rng).map(|(wi, pdf_b, beta_next)| {
-                    closest.push(v.it.spawn_ray(wi));
-                    (closest.len() - 1, wi, pdf_b, beta_next)
+                p.next = self.continuation(v, p.bounce, p.counted, p.beta, rng).map(|c| {
+                    closest.push(v.it.spawn_ray(c.wi));
+                    (closest.len() - 1, c)
                 });
             }
             if !live {
@@ -119,25 +118,25 @@ impl PathTracer<'_> {
                 if p.counted {
                     p.l += p.beta * self.replay(&terms[p.terms.clone()], &occluded, &closest, &found);
                 }
-                let Some((k, wi, pdf_b, beta_next)) = p.next else { continue };
-                let gather = p.counted && !self.hemisphere;
+                let Some((k, c)) = p.next else { continue };
+                let gather = p.counted && (!self.hemisphere || c.delta);
                 let Some(next) = found[k].map(|h| Interaction::with_barycentrics(self.scene, &closest[k], &h, self.accel.exact_barycentrics())) else {
                     if gather {
-                        p.l += beta_next * self.lights.escaped(wi) * self.bsdf_weight_escape(wi, pdf_b);
+                        p.l += c.beta * self.lights.escaped(c.wi) * self.bsdf_weight_escape(&c);
                     }
                     continue;
                 };
                 if gather {
-                    let le = emitted(self.scene, &next, -wi);
+                    let le = emitted(self.scene, &next, -c.wi);
                     if le != Vec3::ZERO {
-                        p.l += beta_next * le * self.bsdf_weight_hit(&v, &next, pdf_b);
+                        p.l += c.beta * le * self.bsdf_weight_hit(&v, &next, &c);
                     }
                 }
                 if p.bounce == m {
                     continue;
                 }
-                p.v = Some(self.vertex(next, -wi));
-                p.beta = beta_next;
+                p.v = Some(self.vertex(next, -c.wi));
+                p.beta = c.beta;
                 p.bounce += 1;
             }
         }
@@ -154,13 +153,11 @@ impl PathTracer<'_> {
     /// `-H` adds CS184's uniform hemisphere samples for the lights a ray
     /// can hit.
     pub(super) fn direct_terms(&self, v: &Vertex, rng: &mut Rng, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) {
-        if v.albedo == Vec3::ZERO {
-            return;
-        }
+        // Delta BSDFs see lights only through their sampled ray.
+        let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return };
         let explicit = self.lights.lights.iter().filter(|l| !self.hemisphere || !l.is_visible());
         for light in explicit {
             let n = if light.is_delta() { 1 } else { self.light_samples };
-            let f = v.albedo / PI;
             let mis = !self.hemisphere && light.is_visible();
             for _ in 0..n {
                 let u = rng.uniform2();
@@ -170,11 +167,16 @@ impl PathTracer<'_> {
                 if cos <= 0.0 || s.wi.dot(v.ng) <= 0.0 || s.pdf <= 0.0 {
                     continue;
                 }
+                let wi = v.frame.to_local(s.wi);
+                let f = bsdf.eval(v.wo, wi);
+                if f == Vec3::ZERO {
+                    continue;
+                }
                 shadow.push(match s.target {
                     Target::Point(q) => v.it.spawn_ray_to(q),
                     Target::Infinite => v.it.spawn_ray(s.wi),
                 });
-                let w = if mis { super::path::power_heuristic(n as f32 * s.pdf, cosine_hemisphere_pdf(cos)) } else { 1.0 };
+                let w = if mis { super::path::power_heuristic(n as f32 * s.pdf, bsdf.pdf(v.wo, wi)) } else { 1.0 };
                 terms.push(Term::Shadow { ray: shadow.len() - 1, value: f * s.value * cos / s.pdf * w });
             }
             terms.push(Term::Group { n });
@@ -184,16 +186,15 @@ impl PathTracer<'_> {
         }
         let visible = self.lights.lights.iter().filter(|l| l.is_visible()).count() as u32;
         let n = visible.max(1) * self.light_samples;
-        let frame = Frame::new(v.ns);
-        let f = v.albedo / PI;
         for _ in 0..n {
             let (u1, u2) = rng.uniform2();
-            let wi = frame.to_world(uniform_hemisphere(u1, u2));
+            let local = uniform_hemisphere(u1, u2);
+            let wi = v.frame.to_world(local);
             if wi.dot(v.ng) <= 0.0 {
                 continue;
             }
             closest.push(v.it.spawn_ray(wi));
-            terms.push(Term::Hemisphere { ray: closest.len() - 1, f, wi, cos: wi.dot(v.ns) });
+            terms.push(Term::Hemisphere { ray: closest.len() - 1, f: bsdf.eval(v.wo, local), wi, cos: wi.dot(v.ns) });
         }
         terms.push(Term::Group { n });
     }
@@ -231,18 +232,24 @@ impl PathTracer<'_> {
     /// weights of surviving paths near 1, so dark paths, which would add
     /// little, are the ones cut, and no weight can blow up as it can with a
     /// constant probability).
-    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, rng: &mut Rng) -> Option<(Vec3, f32, Vec3)> {
+    /// The last vertex samples its BSDF only to find emitters: with MIS
+    /// (its share of the direct light) or behind a delta BSDF (the only way
+    /// to see light there), and only when its bounce counts.
+    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, rng: &mut Rng) -> Option<Continuation> {
         let last = bounce == self.max_depth;
-        if v.albedo == Vec3::ZERO || (last && (self.hemisphere || !count)) {
+        let bsdf = v.bsdf?;
+        if last && (!count || (self.hemisphere && !bsdf.is_delta())) {
             return None;
         }
-        let (u1, u2) = rng.uniform2();
-        let wi = Frame::new(v.ns).to_world(cosine_hemisphere(u1, u2));
-        let pdf_b = cosine_hemisphere_pdf(wi.dot(v.ns));
-        if wi.dot(v.ng) <= 0.0 || pdf_b <= 0.0 {
+        let s = bsdf.sample(v.wo, rng)?;
+        let wi = v.frame.to_world(s.wi);
+        // The sampled side must agree with the geometric normal's: a
+        // reflection leaving below the face (or a transmission above it),
+        // possible with shading normals, would start inside the surface.
+        if (wi.dot(v.ng) > 0.0) != (s.wi.z > 0.0) || wi.dot(v.ng) == 0.0 {
             return None;
         }
-        let mut beta_next = beta * v.albedo;
+        let mut beta_next = beta * s.weight;
         if self.russian_roulette && bounce >= 2 && !last {
             let q = beta_next.max_element().min(1.0);
             if q <= 0.0 || rng.uniform() >= q {
@@ -250,6 +257,6 @@ impl PathTracer<'_> {
             }
             beta_next /= q;
         }
-        Some((wi, pdf_b, beta_next))
+        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta })
     }
 }

@@ -12,11 +12,19 @@
 //!   irradiance), the hemisphere ("ambient") light (radiance from every
 //!   direction with y > 0, seen by rays that escape), and proxy-less
 //!   rectangular area lights (not geometry, so only light sampling sees them).
+//! * The environment light (`-e FILE.exr`, see `environment`): radiance from
+//!   every direction, seen by escaping rays, importance sampled.
+//! * Lights of zero radiance (the `_unlit` scenes' sky) are dropped.
+
+pub mod environment;
+
+pub use environment::EnvMap;
 
 use crate::error::Result;
 use crate::sampling::{magnitude, offset_ray_origin, uniform_hemisphere, uniform_sphere, uniform_triangle, UNIFORM_HEMISPHERE_PDF};
 use crate::scene::{Interaction, LightKind, Scene, Shape};
 use glam::{Vec3, Vec4Swizzles};
+use std::sync::Arc;
 use std::f32::consts::PI;
 
 #[derive(Clone, Debug)]
@@ -30,6 +38,8 @@ pub enum Light {
     /// The triangles of an emissive mesh, sampled by area.
     Mesh { geom_id: u32, cdf: Vec<f32>, area: f32, radiance: Vec3 },
     Sphere { center: Vec3, radius: f32, radiance: Vec3 },
+    /// A latitude-longitude environment map (`-e`).
+    Environment(Arc<EnvMap>),
 }
 
 /// Where a shadow ray must reach.
@@ -60,7 +70,7 @@ impl Light {
 
     /// Whether rays can hit this emitter (so hemisphere sampling finds it).
     pub fn is_visible(&self) -> bool {
-        matches!(self, Light::Mesh { .. } | Light::Sphere { .. } | Light::Hemisphere { .. })
+        matches!(self, Light::Mesh { .. } | Light::Sphere { .. } | Light::Hemisphere { .. } | Light::Environment(_))
     }
 
     pub fn describe(&self) -> String {
@@ -71,6 +81,7 @@ impl Light {
             Light::Rect { corner, ex, ey, radiance, .. } => format!("rectangle at {corner} {}x{} radiance {radiance}", ex.length(), ey.length()),
             Light::Mesh { geom_id, area, radiance, .. } => format!("emissive mesh {geom_id} area {area} radiance {radiance}"),
             Light::Sphere { center, radius, radiance } => format!("emissive sphere at {center} r {radius} radiance {radiance}"),
+            Light::Environment(e) => format!("environment map {} ({}x{})", e.path, e.width, e.height),
         }
     }
 
@@ -96,6 +107,7 @@ impl Light {
     pub fn pdf_escape(&self, dir: Vec3) -> f32 {
         match self {
             Light::Hemisphere { .. } if dir.y > 0.0 => UNIFORM_HEMISPHERE_PDF,
+            Light::Environment(e) => e.pdf(dir),
             _ => 0.0,
         }
     }
@@ -148,6 +160,10 @@ impl Light {
                 let q = *center + n * *radius;
                 area_sample(p, q, n, center.abs().max_element() + radius, *radiance, 1.0 / (4.0 * PI * radius * radius))
             }
+            Light::Environment(e) => {
+                let (wi, value, pdf) = e.sample(u)?;
+                Some(LightSample { wi, value, pdf, target: Target::Infinite })
+            }
         }
     }
 }
@@ -191,6 +207,11 @@ pub struct Lights {
 
 impl Lights {
     pub fn from_scene(scene: &Scene) -> Result<Lights> {
+        Self::with_environment(scene, None)
+    }
+
+    /// The scene's lights plus an environment map (`-e`).
+    pub fn with_environment(scene: &Scene, env: Option<Arc<EnvMap>>) -> Result<Lights> {
         let mut out = Lights { of_geometry: vec![None; scene.shapes.len()], ..Lights::default() };
         // Emissive shapes first.
         for (g, shape) in scene.shapes.iter().enumerate() {
@@ -219,6 +240,10 @@ impl Lights {
             }
         }
         for l in &scene.lights {
+            if l.radiance == Vec3::ZERO {
+                out.notes.push(format!("{} light '{}' has zero radiance: ignored", l.kind.as_str(), l.name));
+                continue;
+            }
             let xf = l.transform;
             let pos = (xf * glam::Vec4::new(0.0, 0.0, 0.0, 1.0)).xyz();
             match l.kind {
@@ -254,6 +279,13 @@ impl Lights {
                 }
             }
         }
+        if let Some(e) = env {
+            if e.is_black() {
+                out.notes.push(format!("environment map {} is black everywhere", e.path));
+            } else {
+                out.lights.push(Light::Environment(e));
+            }
+        }
         Ok(out)
     }
 
@@ -263,6 +295,7 @@ impl Lights {
             .iter()
             .map(|l| match l {
                 Light::Hemisphere { radiance } if dir.y > 0.0 => *radiance,
+                Light::Environment(e) => e.eval(dir),
                 _ => Vec3::ZERO,
             })
             .sum()
