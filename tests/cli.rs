@@ -114,14 +114,20 @@ fn lighting_flags_are_refused_with_normal_shading() {
 
 #[test]
 fn unsupported_materials_are_refused_by_name() {
-    let d = scratch("mirror");
-    let scene = common::scene_path("sky", "CBspheres");
-    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).arg(&scene).args(["-r", "8", "8"]).current_dir(&d).output().unwrap();
+    // Rough glass is parsed but not modelled: refused, naming the material.
+    let d = scratch("rough-glass");
+    let text = std::fs::read_to_string(common::scene_path("sky", "CBspheres")).unwrap();
+    assert!(text.contains("<roughness>0</roughness>"), "CBspheres.dae changed: no smooth glass to roughen");
+    let scene = d.join("rough.dae");
+    std::fs::write(&scene, text.replace("<roughness>0</roughness>", "<roughness>0.2</roughness>")).unwrap();
+    let out_dir = d.join("out");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).arg(&scene).args(["-r", "8", "8"]).current_dir(&out_dir).output().unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("mirror") || err.contains("glass"), "{err}");
-    assert!(err.contains("CBspheres.dae") && err.trim_end().lines().count() == 1, "{err}");
-    assert!(std::fs::read_dir(&d).unwrap().next().is_none(), "output written");
+    assert!(err.contains("glass") && err.contains("roughness 0.2"), "{err}");
+    assert!(err.contains("rough.dae") && err.trim_end().lines().count() == 1, "{err}");
+    assert!(std::fs::read_dir(&out_dir).unwrap().next().is_none(), "output written");
 }
 
 #[test]

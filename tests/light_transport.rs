@@ -14,43 +14,12 @@ use pathtracer::light::{Light, Lights};
 use pathtracer::render::{self, path::PathTracer, RenderSettings};
 use pathtracer::rng::Rng;
 use pathtracer::sampling::{cosine_hemisphere, cosine_hemisphere_pdf, uniform_hemisphere, UNIFORM_HEMISPHERE_PDF};
-use pathtracer::scene::{Bsdf, CameraDesc, LightDesc, LightKind, Material, Object, Scene, Shape, TriangleMesh};
-use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
+use common::{camera_at, chi2_p, cube_mesh, diffuse, flat_cube_mesh, scene_of, sidak, z_crit};
+use pathtracer::scene::{LightDesc, LightKind, Scene, Shape, TriangleMesh};
+
 use std::f32::consts::PI;
 
-/// Two-sided critical z for family-wise `alpha` over `m` tests (Šidák).
-fn z_crit(alpha: f64, m: usize) -> f64 {
-    let a = 1.0 - (1.0 - alpha).powf(1.0 / m as f64);
-    Normal::new(0.0, 1.0).unwrap().inverse_cdf(1.0 - a / 2.0)
-}
-
-fn sidak(alpha: f64, m: usize) -> f64 {
-    1.0 - (1.0 - alpha).powf(1.0 / m as f64)
-}
-
 // ---------------------------------------------------------------- samplers
-
-/// Pearson chi-square p-value of `counts` against `expected`, pooling cells
-/// with expected count below 5 (Mitsuba/pbrt practice).
-fn chi2_p(counts: &[f64], expected: &[f64]) -> f64 {
-    let (mut chi2, mut dof) = (0.0, 0usize);
-    let (mut pool_c, mut pool_e) = (0.0, 0.0);
-    for (&c, &e) in counts.iter().zip(expected) {
-        assert!(e > 0.0 || c == 0.0, "samples in a zero-pdf cell");
-        if e < 5.0 {
-            pool_c += c;
-            pool_e += e;
-            continue;
-        }
-        chi2 += (c - e) * (c - e) / e;
-        dof += 1;
-    }
-    if pool_e >= 5.0 {
-        chi2 += (pool_c - pool_e) * (pool_c - pool_e) / pool_e;
-        dof += 1;
-    }
-    1.0 - ChiSquared::new((dof - 1) as f64).unwrap().cdf(chi2)
-}
 
 /// Bin directions on the +z hemisphere over a (cos theta, phi) grid.
 fn hemisphere_counts(n: usize, rows: usize, cols: usize, mut sample: impl FnMut(f32, f32) -> Vec3) -> Vec<f64> {
@@ -178,75 +147,6 @@ fn area_light_pdf_is_a_density_over_solid_angle() {
 }
 
 // ---------------------------------------------------------------- scenes in code
-
-fn diffuse(name: &str, albedo: f32, emission: f32) -> Material {
-    Material { name: name.into(), bsdf: Bsdf::Diffuse { albedo: Vec3::splat(albedo) }, emission: Vec3::splat(emission) }
-}
-
-/// A welded cube [-h,h]^3 (shared vertices), every triangle wound to face
-/// `inward` or outward. Its vertex normals are CS184's area-weighted ones,
-/// diagonal at the corners.
-fn cube_mesh(h: f32, center: Vec3, inward: bool) -> TriangleMesh {
-    let v: Vec<Vec3> = (0..8).map(|i| center + h * Vec3::new(if i & 1 == 0 { -1.0 } else { 1.0 }, if i & 2 == 0 { -1.0 } else { 1.0 }, if i & 4 == 0 { -1.0 } else { 1.0 })).collect();
-    let quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
-    let mut triangles = Vec::new();
-    for q in quads {
-        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-            let [a, b, c] = t.map(|i: u32| v[i as usize]);
-            let n = (b - a).cross(c - a);
-            let faces_in = n.dot(center - a) > 0.0;
-            triangles.push(if faces_in == inward { t } else { [t[0], t[2], t[1]] });
-        }
-    }
-    let mut m = TriangleMesh { positions: v, triangles, normals: vec![] };
-    m.compute_normals();
-    m
-}
-
-/// The same cube with each face's vertices its own, so vertex normals equal
-/// face normals: flat shading, which the furnace's closed forms assume.
-/// Shared edges still have bit-identical coordinates: it stays watertight.
-fn flat_cube_mesh(h: f32, center: Vec3, inward: bool) -> TriangleMesh {
-    let welded = cube_mesh(h, center, inward);
-    let mut m = TriangleMesh::default();
-    for t in &welded.triangles {
-        let base = m.positions.len() as u32;
-        m.positions.extend(t.map(|i| welded.positions[i as usize]));
-        m.triangles.push([base, base + 1, base + 2]);
-    }
-    m.compute_normals();
-    m
-}
-
-fn scene_of(shapes: Vec<(Shape, Material)>, lights: Vec<LightDesc>) -> Scene {
-    let mut scene = Scene {
-        name: "test".into(),
-        source: "<test>".into(),
-        shapes: vec![],
-        objects: vec![],
-        materials: vec![],
-        lights,
-        camera: CameraDesc::default(),
-    };
-    for (i, (s, m)) in shapes.into_iter().enumerate() {
-        scene.shapes.push(s);
-        scene.materials.push(m);
-        scene.objects.push(Object { name: format!("shape{i}"), material: i });
-    }
-    scene
-}
-
-/// A camera at `pos` looking down -z with a 60-degree field of view.
-fn camera_at(scene: &Scene, pos: Vec3, w: u32, h: u32) -> Camera {
-    let mut c = Camera::from_scene(scene);
-    c.pos = pos;
-    c.c2w = Mat3::IDENTITY;
-    c.near = 0.0;
-    c.far = f32::INFINITY;
-    c.hfov_deg = 60.0;
-    c.vfov_deg = (2.0 * ((30f32).to_radians().tan() * h as f32 / w as f32).atan()).to_degrees();
-    c
-}
 
 struct Stats {
     mean: f64,
@@ -427,24 +327,28 @@ fn russian_roulette_changes_variance_not_the_mean() {
 }
 
 #[test]
-fn no_nan_or_inf_on_any_supported_shipped_scene() {
+fn every_shipped_scene_renders_finite_on_every_fast_backend() {
+    // All 20 CS184 scenes are supported (mirror, glass, refraction and
+    // microfacet included); none may be refused or produce NaN/Inf, with
+    // light sampling or hemisphere sampling, at -m 5.
     let mut rendered = Vec::new();
+    let backends: Vec<BackendKind> = common::backends().into_iter().filter(|b| *b != BackendKind::Brute).collect();
     for path in common::shipped_scenes() {
         let scene = common::load(&path);
-        if pathtracer::cli::check_materials(&scene).is_err() {
-            continue;
-        }
+        pathtracer::cli::check_materials(&scene).unwrap_or_else(|e| panic!("{}: refused: {e}", path.display()));
         let mut cam = Camera::from_scene(&scene);
         cam.screen_dist *= 0.1;
         cam.set_screen_size(80, 60);
-        for hemi in [false, true] {
-            let s = render_stats(&scene, &cam, BackendKind::Native, 4, true, hemi, true, 4, 9, 80, 60);
-            assert!(s.all_finite, "{}: non-finite output (-H={hemi})", path.display());
+        for &backend in &backends {
+            for hemi in [false, true] {
+                let s = render_stats(&scene, &cam, backend, 5, true, hemi, true, 4, 9, 80, 60);
+                assert!(s.all_finite, "{}: non-finite output ({backend}, -H={hemi})", path.display());
+            }
         }
         rendered.push(scene.name);
     }
-    assert!(rendered.len() >= 11, "only {rendered:?} rendered");
-    eprintln!("finite on {} scenes: {rendered:?}", rendered.len());
+    assert_eq!(rendered.len(), 20, "{rendered:?}");
+    eprintln!("finite on {} scenes with {backends:?}", rendered.len());
 }
 
 #[test]

@@ -28,6 +28,6 @@ impl Diffuse {
         let wi = cosine_hemisphere(u.0, u.1);
         let pdf = cosine_hemisphere_pdf(wi.z);
         // f cos / pdf = albedo exactly: no rounding from the division.
-        (pdf > 0.0).then_some(BsdfSample { wi, weight: self.albedo, pdf, delta: false })
+        (pdf > 0.0).then_some(BsdfSample { wi, weight: self.albedo, pdf, delta: false, radiance_scale: 1.0 })
     }
 }

@@ -50,10 +50,10 @@ impl Glass {
         let f = self.fresnel(wo);
         if u < f {
             let wi = reflect(wo);
-            return (self.reflectance != Vec3::ZERO).then_some(BsdfSample { wi, weight: self.reflectance, pdf: f, delta: true });
+            return (self.reflectance != Vec3::ZERO).then_some(BsdfSample { wi, weight: self.reflectance, pdf: f, delta: true, radiance_scale: 1.0 });
         }
         let wi = refract(wo, eta)?;
         let weight = self.transmittance / (eta * eta);
-        (weight != Vec3::ZERO).then_some(BsdfSample { wi, weight, pdf: 1.0 - f, delta: true })
+        (weight != Vec3::ZERO).then_some(BsdfSample { wi, weight, pdf: 1.0 - f, delta: true, radiance_scale: 1.0 / (eta * eta) })
     }
 }

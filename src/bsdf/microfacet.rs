@@ -129,6 +129,6 @@ impl Microfacet {
             return None;
         }
         let weight = self.eval(wo, wi) * wi.z / pdf;
-        Some(BsdfSample { wi, weight, pdf, delta: false })
+        Some(BsdfSample { wi, weight, pdf, delta: false, radiance_scale: 1.0 })
     }
 }

@@ -16,6 +16,6 @@ pub struct Mirror {
 impl Mirror {
     pub fn sample(&self, wo: Vec3) -> Option<BsdfSample> {
         let wi = reflect(wo);
-        (wi.z > 0.0 && self.reflectance != Vec3::ZERO).then_some(BsdfSample { wi, weight: self.reflectance, pdf: 1.0, delta: true })
+        (wi.z > 0.0 && self.reflectance != Vec3::ZERO).then_some(BsdfSample { wi, weight: self.reflectance, pdf: 1.0, delta: true, radiance_scale: 1.0 })
     }
 }

@@ -43,6 +43,11 @@ pub struct BsdfSample {
     /// that lobe (MIS treats delta samples as weight 1 whatever it is).
     pub pdf: f32,
     pub delta: bool,
+    /// (η_i/η_t)², the radiance scaling a transmission applied to `weight`
+    /// (1 for reflection). Russian roulette divides it back out, so paths
+    /// inside glass are not cut for the η² their weight carries until
+    /// they leave (pbrt-v4's etaScale).
+    pub radiance_scale: f32,
 }
 
 /// The scattering model at one surface point.

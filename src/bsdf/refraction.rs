@@ -22,6 +22,6 @@ impl Refraction {
         let eta = if self.front { self.ior } else { 1.0 / self.ior };
         let wi = refract(wo, eta)?;
         let weight = self.transmittance / (eta * eta);
-        (weight != Vec3::ZERO).then_some(BsdfSample { wi, weight, pdf: 1.0, delta: true })
+        (weight != Vec3::ZERO).then_some(BsdfSample { wi, weight, pdf: 1.0, delta: true, radiance_scale: 1.0 / (eta * eta) })
     }
 }

@@ -75,7 +75,7 @@ fn albedo(m: &Bsdf, wo: Vec3, n: usize, seed: u64) -> (Vec3, Vec3) {
         }
     }
     let mean = s1 / n as f64;
-    let se = ((s2 / n as f64 - mean * mean).max(glam::DVec3::ZERO) / n as f64).sqrt();
+    let se = ((s2 / n as f64 - mean * mean).max(glam::DVec3::ZERO) / n as f64).map(f64::sqrt);
     (mean.as_vec3(), se.as_vec3())
 }
 

@@ -140,6 +140,7 @@ impl Integrator for PathTracer<'_> {
         }
         let mut v = self.vertex(it, wo);
         let mut beta = Vec3::ONE;
+        let mut radiance_scale = 1.0;
         let mut bounce = 1;
         loop {
             let count = counts(bounce);
@@ -148,7 +149,7 @@ impl Integrator for PathTracer<'_> {
             }
             // With MIS the last vertex still needs its BSDF sample: the light
             // it finds is part of this bounce's direct light.
-            let Some(c) = self.continuation(&v, bounce, count, beta, rng) else { break };
+            let Some(c) = self.continuation(&v, bounce, count, beta, radiance_scale, rng) else { break };
             let last = bounce == m;
             let ray = v.it.spawn_ray(c.wi);
             let gather = count && (!self.hemisphere || c.delta);
@@ -169,6 +170,7 @@ impl Integrator for PathTracer<'_> {
             }
             v = self.vertex(next, -c.wi);
             beta = c.beta;
+            radiance_scale = c.radiance_scale;
             bounce += 1;
         }
         l
@@ -186,6 +188,9 @@ pub(super) struct Continuation {
     pub beta: Vec3,
     /// Sampled from a delta lobe.
     pub delta: bool,
+    /// The product of the path's radiance scalings (η²) so far, which
+    /// Russian roulette divides out of `beta`.
+    pub radiance_scale: f32,
 }
 
 /// Veach's power heuristic (beta = 2) for a sample of pdf `a` against `b`,

@@ -36,6 +36,8 @@ pub(super) enum Term {
 struct Path {
     l: Vec3,
     beta: Vec3,
+    /// See `Continuation::radiance_scale`.
+    radiance_scale: f32,
     v: Option<Vertex>,
     bounce: u32,
     /// Direct-light terms of the current vertex (when this bounce counts):
@@ -58,7 +60,7 @@ impl PathTracer<'_> {
             .zip(hits)
             .map(|(ray, hit)| {
                 let wo = -ray.dir.normalize();
-                let mut p = Path { l: Vec3::ZERO, beta: Vec3::ONE, v: None, bounce: 1, terms: 0..0, counted: false, next: None };
+                let mut p = Path { l: Vec3::ZERO, beta: Vec3::ONE, radiance_scale: 1.0, v: None, bounce: 1, terms: 0..0, counted: false, next: None };
                 match hit.map(|h| Interaction::with_barycentrics(self.scene, ray, &h, self.accel.exact_barycentrics())) {
                     None => {
                         if counts(0) {
@@ -96,7 +98,7 @@ impl PathTracer<'_> {
                     self.direct_terms(v, rng, &mut terms, &mut shadow, &mut closest);
                 }
                 p.terms = first..terms.len();
-                p.next = self.continuation(v, p.bounce, p.counted, p.beta, rng).map(|c| {
+                p.next = self.continuation(v, p.bounce, p.counted, p.beta, p.radiance_scale, rng).map(|c| {
                     closest.push(v.it.spawn_ray(c.wi));
                     (closest.len() - 1, c)
                 });
@@ -137,6 +139,7 @@ impl PathTracer<'_> {
                 }
                 p.v = Some(self.vertex(next, -c.wi));
                 p.beta = c.beta;
+                p.radiance_scale = c.radiance_scale;
                 p.bounce += 1;
             }
         }
@@ -235,7 +238,8 @@ impl PathTracer<'_> {
     /// The last vertex samples its BSDF only to find emitters: with MIS
     /// (its share of the direct light) or behind a delta BSDF (the only way
     /// to see light there), and only when its bounce counts.
-    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, rng: &mut Rng) -> Option<Continuation> {
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, radiance_scale: f32, rng: &mut Rng) -> Option<Continuation> {
         let last = bounce == self.max_depth;
         let bsdf = v.bsdf?;
         if last && (!count || (self.hemisphere && !bsdf.is_delta())) {
@@ -250,13 +254,16 @@ impl PathTracer<'_> {
             return None;
         }
         let mut beta_next = beta * s.weight;
+        let radiance_scale = radiance_scale * s.radiance_scale;
         if self.russian_roulette && bounce >= 2 && !last {
-            let q = beta_next.max_element().min(1.0);
+            // Judged on the throughput without the η² scaling of radiance
+            // inside a dielectric (which leaving it undoes).
+            let q = (beta_next.max_element() / radiance_scale).min(1.0);
             if q <= 0.0 || rng.uniform() >= q {
                 return None;
             }
             beta_next /= q;
         }
-        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta })
+        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale })
     }
 }
