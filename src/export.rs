@@ -41,7 +41,7 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
             Bsdf::Microfacet { alpha, eta, k } => (
                 glam::Vec3::ZERO,
                 json!({"type": "microfacet", "distribution": "beckmann", "alpha": alpha, "eta": v3(eta), "k": v3(k),
-                       "masking": "height-correlated Smith, exact Beckmann lambda", "fresnel": "exact conductor at wi.h", "two_sided": false}),
+                       "masking": "separable Smith G1(wo) G1(wi), exact Beckmann lambda", "fresnel": "exact conductor at wi.h", "two_sided": false}),
             ),
         };
         let mut entry = json!({

@@ -28,6 +28,11 @@ use glam::Vec3;
 use std::f64::consts::PI;
 use std::path::Path;
 
+/// sin θ of the f32 directions nearest the poles (1 − 2⁻²⁴ in y): where a
+/// direction rounds onto a pole, `sample` and `pdf` both use this value, so
+/// they stay consistent (the solid angle involved is ~1e-7 sr).
+const POLE_SIN: f64 = 3.4526698e-4;
+
 #[derive(Debug)]
 pub struct EnvMap {
     pub path: String,
@@ -161,9 +166,7 @@ impl EnvMap {
             return 0.0;
         }
         let (x, y, sin_t) = self.texel_coords(d);
-        if !(sin_t > 0.0) {
-            return 0.0;
-        }
+        let sin_t = sin_t.max(POLE_SIN);
         let i = (x as usize).min(self.width - 1);
         let j = (y as usize).min(self.height - 1);
         self.texel_pdf(self.prob[j * self.width + i], sin_t)
@@ -196,8 +199,13 @@ impl EnvMap {
             return None;
         }
         let (x, y) = (i as f64 + dx, j as f64 + dy);
-        let (d, sin_t) = self.direction(x, y);
-        if !(sin_t > 0.0) {
+        let (d, sin_exact) = self.direction(x, y);
+        // sin θ of the direction as returned (f32), as `pdf` computes it:
+        // near the poles the f64 value differs in the fourth digit. Where
+        // the f32 direction rounds onto the pole, keep the exact value.
+        let dy = d.y as f64;
+        let sin_t = (1.0 - dy * dy).max(0.0).sqrt().max(POLE_SIN);
+        if !(sin_exact > 0.0) {
             return None;
         }
         Some((d, self.bilerp(x, y), self.texel_pdf(p, sin_t)))
