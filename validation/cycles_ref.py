@@ -18,6 +18,19 @@ have power 4π·I and radius 0; our directional light is a SUN lamp of angle 0 w
 irradiance; our hemisphere light is a world shader that is L above the horizon (y > 0) and
 black below. Spheres are exact spheres (a one-point cloud of that radius).
 
+Materials (../shared/notes/cs184-3-2.md section 3.2): mirror = Glossy BSDF, Sharp (two-sided,
+weight exactly the colour); CS184's refraction = Refraction BSDF, Sharp (no Fresnel, total
+internal reflection ends the path, as ours); glass = Mix Shader(Fac = Fresnel node with the
+ior, Refraction Sharp × transmittance, Glossy Sharp × reflectance): exact Fresnel (the node
+inverts the ior on backfaces) with separate colours; Cycles scales no radiance by eta^2, which
+cancels for closed objects lit from outside (the only kind the harness renders). Microfacet is
+refused: Cycles 3.4 has no conductor Fresnel. The environment map is a world shader that
+computes our lat-long (u, v) with Math nodes from the ray direction and looks up our texels,
+padded with a copy of the first and last rows, through an Image Texture (Linear, Repeat):
+texel-centred bilinear, wrapping horizontally and clamped vertically, as ours. Depth of field:
+the camera's disk aperture of our lens radius (f-stop = lens mm / 2000 / radius), focused on
+the plane at our focal distance.
+
 Modes other than `radiance` check intersection only: `object-id` paints every object its
 exported `id_colour` as emission, `depth` emits the distance from the camera (Camera Data →
 View Distance), `normal` writes Cycles' normal pass through the compositor. Like every
@@ -77,6 +90,102 @@ def diffuse_material(name, albedo):
     d.inputs["Roughness"].default_value = 0.0  # Lambert, not Oren-Nayar
     nt.links.new(d.outputs["BSDF"], out.inputs["Surface"])
     return mat
+
+
+def sharp(nt, kind, colour, ior=None):
+    n = nt.nodes.new(kind)
+    n.distribution = "SHARP"
+    n.inputs["Color"].default_value = (*colour, 1.0)
+    if ior is not None:
+        n.inputs["IOR"].default_value = ior
+    return n
+
+
+def scattering_material(name, s):
+    """The shape's BSDF as Cycles nodes, exactly, or a refusal."""
+    b = s.get("bsdf", {"type": "diffuse"})
+    t = b["type"]
+    if t == "diffuse":
+        return diffuse_material(name, s["albedo"])
+    if t in ("glass", "refraction") and s["type"] == "sphere":
+        # Measured: CBspheres' glass sphere (a point of that radius) rendered up to 3x
+        # brighter through the sphere than ours and Mitsuba's, with Cycles' own Glass BSDF
+        # as with the node recipe; glass meshes (CBgems) agree. Refraction needs the ray
+        # to find the sphere again from inside, which Cycles' point primitives do not give.
+        refuse(f"shape {s['id']}: a refracting sphere (Cycles 3.4's exact spheres are point-cloud points, not found again from inside)")
+    mat = bpy.data.materials.new(name)
+    nt, out = node_tree(mat)
+    if t == "mirror":
+        g = sharp(nt, "ShaderNodeBsdfGlossy", b["reflectance"])
+        nt.links.new(g.outputs["BSDF"], out.inputs["Surface"])
+    elif t == "refraction":
+        if b["roughness"] != 0:
+            refuse(f"shape {s['id']}: rough refraction")
+        r = sharp(nt, "ShaderNodeBsdfRefraction", b["transmittance"], b["ior"])
+        nt.links.new(r.outputs["BSDF"], out.inputs["Surface"])
+    elif t == "glass":
+        if b["roughness"] != 0:
+            refuse(f"shape {s['id']}: rough glass")
+        r = sharp(nt, "ShaderNodeBsdfRefraction", b["transmittance"], b["ior"])
+        g = sharp(nt, "ShaderNodeBsdfGlossy", b["reflectance"])
+        f = nt.nodes.new("ShaderNodeFresnel")
+        f.inputs["IOR"].default_value = b["ior"]
+        mix = nt.nodes.new("ShaderNodeMixShader")
+        nt.links.new(f.outputs["Fac"], mix.inputs["Fac"])
+        nt.links.new(r.outputs["BSDF"], mix.inputs[1])
+        nt.links.new(g.outputs["BSDF"], mix.inputs[2])
+        nt.links.new(mix.outputs["Shader"], out.inputs["Surface"])
+    else:
+        refuse(f"shape {s['id']}: {t} (Cycles 3.4 has no conductor Fresnel; its closure weights cannot depend on the light direction)")
+    return mat
+
+
+def environment_world(wnt, bg, path):
+    """Our lat-long lookup as a world shader (see the module doc)."""
+    src = bpy.data.images.load(path)
+    w, h = src.size
+    px = list(src.pixels[:])  # RGBA, row 0 at the bottom
+    row = 4 * w
+    padded = px[:row] + px + px[-row:]
+    img = bpy.data.images.new("environment_padded", w, h + 2, alpha=False, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.pixels.foreach_set(padded)
+    img.pack()
+    coord = wnt.nodes.new("ShaderNodeTexCoord")
+    norm = wnt.nodes.new("ShaderNodeVectorMath")
+    norm.operation = "NORMALIZE"
+    wnt.links.new(coord.outputs["Generated"], norm.inputs[0])
+    sep = wnt.nodes.new("ShaderNodeSeparateXYZ")
+    wnt.links.new(norm.outputs["Vector"], sep.inputs["Vector"])
+
+    def op(name, a, b=None):
+        m = wnt.nodes.new("ShaderNodeMath")
+        m.operation = name
+        for k, v in enumerate((a, b)):
+            if v is None:
+                continue
+            if isinstance(v, (int, float)):
+                m.inputs[k].default_value = v
+            else:
+                wnt.links.new(v, m.inputs[k])
+        return m.outputs["Value"]
+
+    # u = (atan2(-z, x) + pi) / 2pi; v = (h + 1 - theta h / pi) / (h + 2), theta = acos(y)
+    negz = op("MULTIPLY", sep.outputs["Z"], -1.0)
+    phi = op("ADD", op("ARCTAN2", negz, sep.outputs["X"]), float(math.pi))
+    u = op("DIVIDE", phi, 2.0 * math.pi)
+    theta = op("ARCCOSINE", sep.outputs["Y"])
+    v = op("DIVIDE", op("SUBTRACT", float(h + 1), op("MULTIPLY", theta, h / math.pi)), float(h + 2))
+    comb = wnt.nodes.new("ShaderNodeCombineXYZ")
+    wnt.links.new(u, comb.inputs["X"])
+    wnt.links.new(v, comb.inputs["Y"])
+    tex = wnt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Linear"
+    tex.extension = "REPEAT"
+    wnt.links.new(comb.outputs["Vector"], tex.inputs["Vector"])
+    wnt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 1.0
 
 
 def emission_material(name, colour, strength_from_distance=False):
@@ -200,8 +309,8 @@ def build(spec, folder, mode):
 
     shadow_blind = []
     for s in spec["shapes"]:
-        if not s.get("bsdf_two_sided", False) or not s.get("emission_one_sided", False):
-            refuse(f"shape {s['id']}: only two-sided diffuse and one-sided emission are modelled")
+        if not s.get("emission_one_sided", False):
+            refuse(f"shape {s['id']}: only one-sided emission is modelled")
         name = f"shape{s['id']}"
         emissive = max(s["emission"]) > 0
         rect = None
@@ -213,8 +322,10 @@ def build(spec, folder, mode):
             mat = emission_material(name, s["id_colour"])
         elif mode == "depth":
             mat = emission_material(name, (1.0, 1.0, 1.0), strength_from_distance=True)
-        elif mode == "normal" or not emissive:
+        elif mode == "normal":
             mat = diffuse_material(name, s["albedo"])
+        elif not emissive:
+            mat = scattering_material(name, s)
         else:
             if max(s["albedo"]) > 0:
                 refuse(f"shape {s['id']}: an emitter that also reflects")
@@ -291,6 +402,8 @@ def build(spec, folder, mode):
                 wnt.links.new(sep.outputs["Y"], gt.inputs[0])
                 bg.inputs["Color"].default_value = (*l["radiance"], 1.0)
                 wnt.links.new(gt.outputs["Value"], bg.inputs["Strength"])
+            elif t == "environment":
+                environment_world(wnt, bg, os.path.join(folder, l["file"]))
             elif t == "rect":
                 corner, u, v, n = (Vector(l[k]) for k in ("corner", "ex", "ey", "normal"))
                 if l.get("visible", False):
@@ -308,6 +421,12 @@ def build(spec, folder, mode):
     cd.angle = math.radians(cam["fov_x_deg"])
     cd.clip_start = max(cam["near"], 1e-6)
     cd.clip_end = min(cam["far"], 1e10)
+    if cam.get("lens_radius", 0) > 0:
+        cd.dof.use_dof = True
+        cd.dof.focus_distance = cam["focal_distance"]
+        cd.dof.aperture_blades = 0
+        cd.dof.aperture_ratio = 1.0
+        cd.dof.aperture_fstop = cd.lens * 1e-3 / (2.0 * cam["lens_radius"])
     co = bpy.data.objects.new("camera", cd)
     r, u, f, o = (Vector(cam[k]) for k in ("right", "up", "forward", "origin"))
     co.matrix_world = Matrix(((r.x, u.x, -f.x, o.x), (r.y, u.y, -f.y, o.y), (r.z, u.z, -f.z, o.z), (0, 0, 0, 1)))

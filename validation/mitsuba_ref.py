@@ -8,6 +8,20 @@ field of view, box pixel filter, linear float RGB film, `path` integrator with
 max_depth = our -m + 1 (Mitsuba counts emitter hits as a depth), diffuse BSDFs wrapped in
 `twosided` (ours reflect from both sides), area emitters one-sided along the geometric normal
 (ours too). Anything Mitsuba cannot represent exactly is refused, never approximated.
+
+Materials (../shared/notes/cs184-3-2.md section 3.1): mirror = `twosided` `conductor` with
+material "none" (a 100 % reflector) times the reflectance, exact; glass = `dielectric` with
+int_ior = ior and ext_ior = 1.0 (Mitsuba's default is air, 1.000277), exact Fresnel and the
+same (eta_i/eta_t)^2 radiance scaling as ours, exact; microfacet = `roughconductor` Beckmann
+with our alpha, eta and k: D and the exact conductor Fresnel at wi.h are ours, and Mitsuba's
+separable Smith G uses Walter's rational fit of G1, within 0.35 % of the exact G1 we use (the
+one stated tolerance; it matters only at grazing angles); CS184's `refraction` (no Fresnel)
+has no Mitsuba equivalent and is refused. Thin lens = `thinlens` (the same uniform disk and
+focal plane). The environment map = `envmap` after two exact fixes: Mitsuba's lat-long has the
+other handedness (the map is flipped left-right and turned 90 degrees about +y) and puts rows
+at v = j/(H-1) (the map is resampled to 2H+1 rows that reproduce our clamped bilinear lookup);
+before rendering, Mitsuba's own lookup is compared with ours in 4096 directions, and a
+mismatch refuses the scene.
 """
 import argparse
 import json
@@ -26,6 +40,80 @@ def rgb(v):
     return {"type": "rgb", "value": [float(x) for x in v]}
 
 
+def cs184_lookup(tex, d):
+    """Our environment lookup (CS184's lat-long and clamped bilinear filter) for unit
+    directions d (N x 3), in numpy: the oracle Mitsuba's envmap is checked against."""
+    h, w, _ = tex.shape
+    theta = np.arccos(np.clip(d[:, 1], -1, 1))
+    phi = np.arctan2(-d[:, 2], d[:, 0]) + np.pi
+    x = np.mod(phi / (2 * np.pi) * w, w) - 0.5
+    y = theta / np.pi * h - 0.5
+    i0 = np.floor(x).astype(int)
+    j0 = np.floor(y).astype(int)
+    tx = (x - i0)[:, None]
+    ty = (y - j0)[:, None]
+    def t(i, j):
+        return tex[np.clip(j, 0, h - 1), np.mod(i, w)]
+    top = t(i0, j0) * (1 - tx) + t(i0 + 1, j0) * tx
+    bottom = t(i0, j0 + 1) * (1 - tx) + t(i0 + 1, j0 + 1) * tx
+    return top * (1 - ty) + bottom * ty
+
+
+def mitsuba_envmap(tex, out_path):
+    """Our lat-long texels as a Mitsuba envmap that looks up exactly what we look up."""
+    import mitsuba as mi
+
+    h, w, _ = tex.shape
+    flipped = tex[:, ::-1, :]
+    rows = np.empty((2 * h + 1, w, 3))
+    rows[1::2] = flipped
+    rows[2:-1:2] = 0.5 * (flipped[:-1] + flipped[1:])
+    rows[0] = flipped[0]
+    rows[-1] = flipped[-1]
+    mi.Bitmap(rows.astype(np.float32)).write(out_path)
+    # l = to_world^-1 d = (-d.z, d.y, d.x)
+    m = mi.ScalarTransform4f([[0, 0, 1, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, 0, 0, 1]])
+    return {"type": "envmap", "filename": out_path, "to_world": m, "scale": 1.0}
+
+
+def check_envmap(scene, tex):
+    import mitsuba as mi
+
+    env = scene.environment()
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(4096, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    ours = cs184_lookup(tex.astype(np.float64), d)
+    theirs = np.empty_like(ours)
+    for k in range(len(d)):
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(-d[k]))
+        theirs[k] = np.array(env.eval(si), dtype=np.float64)[:3]
+    err = np.abs(theirs - ours) / (np.abs(ours) + 1e-3)
+    if err.max() > 1e-3:
+        k = int(np.argmax(err.max(axis=1)))
+        refuse(f"Mitsuba's envmap lookup differs from ours by {err.max():.3g} (direction {d[k].tolist()}: {theirs[k].tolist()} vs {ours[k].tolist()})")
+
+
+def bsdf_of(s):
+    b = s.get("bsdf", {"type": "diffuse"})
+    t = b["type"]
+    if t in ("diffuse", "emission"):
+        if not s.get("bsdf_two_sided", False):
+            refuse(f"shape {s['id']}: one-sided diffuse")
+        return {"type": "twosided", "material": {"type": "diffuse", "reflectance": rgb(s["albedo"])}}
+    if t == "mirror":
+        return {"type": "twosided", "material": {"type": "conductor", "material": "none", "specular_reflectance": rgb(b["reflectance"])}}
+    if t == "glass":
+        if b["roughness"] != 0:
+            refuse(f"shape {s['id']}: rough glass")
+        return {"type": "dielectric", "int_ior": float(b["ior"]), "ext_ior": 1.0, "specular_reflectance": rgb(b["reflectance"]),
+                "specular_transmittance": rgb(b["transmittance"])}
+    if t == "microfacet":
+        return {"type": "roughconductor", "distribution": "beckmann", "alpha": float(b["alpha"]), "eta": rgb(b["eta"]), "k": rgb(b["k"])}
+    refuse(f"shape {s['id']}: {t} (CS184's refraction transmits everything with no Fresnel term; no Mitsuba BSDF does)")
+
+
 def scene_dict(spec, folder, max_depth):
     import mitsuba as mi
 
@@ -36,7 +124,7 @@ def scene_dict(spec, folder, max_depth):
         "type": "scene",
         "integrator": {"type": "path", "max_depth": max_depth + 1, "rr_depth": 5, "hide_emitters": False},
         "sensor": {
-            "type": "perspective",
+            "type": "thinlens" if cam.get("lens_radius", 0) > 0 else "perspective",
             "fov": cam["fov_x_deg"],
             "fov_axis": "x",
             "near_clip": max(cam["near"], 1e-4),
@@ -53,10 +141,13 @@ def scene_dict(spec, folder, max_depth):
             },
         },
     }
+    if cam.get("lens_radius", 0) > 0:
+        d["sensor"]["aperture_radius"] = float(cam["lens_radius"])
+        d["sensor"]["focus_distance"] = float(cam["focal_distance"])
     for s in spec["shapes"]:
-        if not s.get("bsdf_two_sided", False) or not s.get("emission_one_sided", False):
-            refuse(f"shape {s['id']}: only two-sided diffuse and one-sided emission are modelled")
-        bsdf = {"type": "twosided", "material": {"type": "diffuse", "reflectance": rgb(s["albedo"])}}
+        if not s.get("emission_one_sided", False):
+            refuse(f"shape {s['id']}: only one-sided emission is modelled")
+        bsdf = bsdf_of(s)
         if s["type"] == "mesh":
             shape = {"type": "obj", "filename": os.path.join(folder, s["file"]), "face_normals": False, "bsdf": bsdf}
         elif s["type"] == "sphere":
@@ -78,6 +169,10 @@ def scene_dict(spec, folder, max_depth):
             refuse("hemisphere light (radiance over y > 0 only): Mitsuba's constant emitter covers the whole sphere")
         elif t == "rect":
             refuse("rectangle light that rays cannot hit: every Mitsuba emitter shape also occludes")
+        elif t == "environment":
+            tex = np.array(mi.Bitmap(os.path.join(folder, l["file"])), dtype=np.float64)[..., :3]
+            d[f"light{i}"] = mitsuba_envmap(tex, os.path.join(folder, "environment_mitsuba.exr"))
+            d["_env_texels"] = tex
         else:
             refuse(f"light type {t}")
     return d
@@ -99,7 +194,11 @@ def main():
     mi.set_variant("scalar_rgb")
     with open(os.path.join(args.scene, "scene.json")) as f:
         spec = json.load(f)
-    scene = mi.load_dict(scene_dict(spec, args.scene, args.max_depth))
+    sd = scene_dict(spec, args.scene, args.max_depth)
+    tex = sd.pop("_env_texels", None)
+    scene = mi.load_dict(sd)
+    if tex is not None:
+        check_envmap(scene, tex)
     t0 = time.time()
     images = []
     for k in range(args.renders):

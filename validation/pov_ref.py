@@ -58,7 +58,13 @@ def pov_scene(spec, folder, mode, shift=(0.0, 0.0), supersample=1, lightlets=Non
         "background { rgb 0 }",
         f"camera {{ perspective location {vec(o)} direction {vec(direction)} right {vec(right)} up {vec(up)} }}",
     ]
+    if spec["camera"].get("lens_radius", 0) > 0:
+        refuse("a thin-lens camera (POV-Ray's focal blur samples its aperture adaptively, not as a uniform disk per ray)")
     if mode == "radiance":
+        for s in spec["shapes"]:
+            t = s.get("bsdf", {"type": "diffuse"})["type"]
+            if t not in ("diffuse", "emission"):
+                refuse(f"shape {s['id']}: {t} (POV-Ray validates direct lighting of diffuse surfaces only)")
         lines += radiance_lights(spec, folder, lightlets, rng)
     # The farthest any visible point can be: bounds of every shape, from the camera.
     far = 0.0

@@ -36,11 +36,21 @@ BATCHES = 8
 REF_COLOURS = {"native": "#d62728", "embree": "#1f77b4", "mitsuba": "#2ca02c", "cycles": "#ff7f0e", "povray": "#9467bd"}
 
 
-def radiance(scene, m, refs, flags=(), label=None, spp_scale=1, ref_shift=None):
+def radiance(scene, m, refs, flags=(), label=None, spp_scale=1, ref_shift=None, scene_flags=(), tag=""):
     """spp_scale multiplies our spp: hemisphere sampling finds a small light with few samples,
     and its per-pixel means are far from normal (most batches see 0-2 light hits) until there
-    are many."""
-    return {"kind": "radiance", "scene": scene, "m": m, "refs": refs, "flags": list(flags), "label": label, "spp_scale": spp_scale, "ref_shift": ref_shift}
+    are many. scene_flags change the scene itself (-e environment map, -b/-d thin lens): they go
+    to the export too, so the references render the same scene; tag names the case apart."""
+    return {"kind": "radiance", "scene": scene, "m": m, "refs": refs, "flags": list(flags), "label": label, "spp_scale": spp_scale, "ref_shift": ref_shift,
+            "scene_flags": list(scene_flags), "tag": tag}
+
+
+def envmap(name):
+    """An environment map from ../shared/envmaps (CC0, see its SOURCE.md); missing data stops the run."""
+    p = os.path.join(ROOT, "..", "shared", "envmaps", name)
+    if not os.path.exists(p):
+        sys.exit(f"run_cases: environment map {p} not found (../shared/envmaps)")
+    return os.path.abspath(p)
 
 
 def geometry(scene, ref_shift=None):
@@ -133,6 +143,8 @@ TIERS = {
         radiance(CB, 5, BOTH),
         radiance("CBempty.dae", 3, BOTH),
         radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="normalise"),
+        radiance("CBspheres.dae", 5, BOTH, label="mirror and glass"),
+        radiance("bunny_unlit.dae", 3, BOTH, label="environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_studio"),
         adaptive(CB, 5, ["cycles"], 32, 0.05, 12),
         geometry(CB),
         geometry("hard_tiny.dae"),
@@ -152,6 +164,15 @@ TIERS = {
         radiance("hard_huge.dae", 3, BOTH, label="hard case: scaled by 1e3", ref_shift="normalise"),
         radiance("hard_grazing.dae", 3, BOTH, label="hard case: light 1e-4 under the ceiling"),
         radiance("hard_slab.dae", 3, BOTH, label="hard case: 1e-4-thick slab"),
+        radiance("CBspheres.dae", 5, BOTH, label="mirror and glass"),
+        radiance("CBspheres_refract.dae", 5, BOTH, label="mirror and CS184 refraction"),
+        radiance("CBgems.dae", 5, BOTH, label="tinted glass gems"),
+        radiance("CBcoil.dae", 5, BOTH, label="mirror coil (reflectance 0.3)"),
+        radiance("CBspheres_microfacet_al_ag.dae", 5, BOTH, label="microfacet Al and Ag"),
+        radiance("CBbunny_microfacet_cu.dae", 5, BOTH, label="microfacet Cu"),
+        radiance("bunny_unlit.dae", 3, BOTH, label="environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_studio"),
+        radiance("bunny_microfacet_cu_unlit.dae", 3, BOTH, label="microfacet Cu under courtyard.exr", scene_flags=["-e", envmap("courtyard.exr")], tag="_env_courtyard"),
+        radiance(CB, 5, BOTH, label="thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens"),
         geometry(CB),
         geometry("CBbunny.dae"),
         geometry("hard_offset.dae", ref_shift="normalise"),
@@ -245,7 +266,8 @@ class Harness:
         references get a copy moved by that vector (folder/scene_ref), see shift_export.
         Returns (our scene arguments, cache key of the references' scene, its folder)."""
         scene = find_scene(case["scene"])
-        sh([self.pt, "export", scene, *self.view, "--out", os.path.join(folder, "scene")])
+        extra = case.get("scene_flags", [])
+        sh([self.pt, "export", scene, *extra, *self.view, "--out", os.path.join(folder, "scene")])
         d = os.path.join(folder, "scene")
         self.ref_scale = 1.0
         if case.get("ref_shift"):
@@ -254,7 +276,7 @@ class Harness:
         for p in sorted(os.listdir(d)):
             with open(os.path.join(d, p), "rb") as f:
                 h.update(p.encode() + f.read())
-        return [scene], h.hexdigest()[:16], d
+        return [scene, *extra], h.hexdigest()[:16], d
 
     # ---- references: each returns {renderer, mean, var, image_means, spp, seconds, curve} ----
 
@@ -353,7 +375,7 @@ class Harness:
 
     def run_radiance(self, case, results):
         name = os.path.splitext(case["scene"])[0]
-        cid = f"{name}_m{case['m']}" + "".join(f.replace("-", "_") for f in case["flags"])
+        cid = f"{name}_m{case['m']}" + "".join(f.replace("-", "_") for f in case["flags"]) + case.get("tag", "")
         folder = self.fresh(cid)
         scene_args, key, ref_dir = self.export(case, folder)
         args = ["-m", str(case["m"]), *case["flags"]]
