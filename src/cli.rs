@@ -280,11 +280,14 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         IntegratorKind::Path => {
             check_materials(&scene)?;
             let l = Lights::with_environment(&scene, env)?;
-            for note in &l.notes {
-                println!("{}: {note}", scene.name);
-            }
             if l.lights.is_empty() {
-                println!("{}: warning: the scene has no light; the image will be black (an environment map, -e FILE.exr, would light it)", scene.name);
+                // One line: the notes (a zero-radiance light dropped) go into it.
+                let why = if l.notes.is_empty() { String::new() } else { format!(" ({})", l.notes.join("; ")) };
+                println!("{}: warning: the scene has no light{why}; the image will be black (an environment map, -e FILE.exr, would light it)", scene.name);
+            } else {
+                for note in &l.notes {
+                    println!("{}: {note}", scene.name);
+                }
             }
             l
         }

@@ -254,3 +254,83 @@ fn bench_writes_csv_and_markdown_tables() {
         eprintln!("note: Embree is not built in; the bench's Embree columns were not checked");
     }
 }
+
+#[test]
+fn lens_zero_is_the_pinhole_bit_for_bit_and_the_camera_file_carries_the_lens() {
+    let d = scratch("lens");
+    let base = ["-s", "4", "-m", "2", "-r", "48", "36", "--keep-fov", "--seed", "5"];
+    fn with<'a>(base: &[&'a str], extra: &[&'a str]) -> Vec<&'a str> {
+        base.iter().chain(extra).copied().collect()
+    }
+    let pinhole = render_exr(&d, "pinhole", &with(&base, &[]));
+    let b0 = render_exr(&d, "b0", &with(&base, &["-b", "0", "-d", "3"]));
+    assert!(pinhole == b0, "-b 0 changed the image");
+    let lens = render_exr(&d, "lens", &with(&base, &["-b", "0.2", "-d", "4.5"]));
+    assert!(lens != pinhole, "-b 0.2 left the image unchanged");
+    // The written camera file ends with CS184's "focal_distance lens_radius" line,
+    // and rendering with it (-c) gives the same image.
+    let cam = d.join("lens.cam");
+    let _ = render_exr(&d, "lens2", &with(&base, &["-b", "0.2", "-d", "4.5", "--write-camera", cam.to_str().unwrap()]));
+    let text = std::fs::read_to_string(&cam).unwrap();
+    assert_eq!(text.lines().last().unwrap().trim(), "4.5 0.2", "{text}");
+    let again = render_exr(&d, "lens3", &with(&base, &["-c", cam.to_str().unwrap()]));
+    assert!(again == lens, "rendering with the camera file changed the image");
+    for (flags, needle) in [(["-b", "-1"], "-b -1"), (["-d", "0"], "-d 0"), (["-b", "nan"], "-b")] {
+        let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).args(flags).args(["-r", "8", "8"]).current_dir(&d).output().unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle) && err.trim_end().lines().count() == 1, "{err}");
+    }
+}
+
+/// A small latitude-longitude map written by the test itself.
+fn write_env(path: &Path, value: glam::Vec3) {
+    let img = pathtracer::image_io::Rgb { width: 16, height: 8, pixels: vec![value; 128] };
+    pathtracer::image_io::write_exr(path, &img).unwrap();
+}
+
+#[test]
+fn environment_light_lights_an_unlit_scene_and_bad_maps_are_refused() {
+    let d = scratch("env");
+    let unlit = common::scene_path("sky", "bunny_unlit");
+    let unlit = unlit.to_str().unwrap();
+    // Without -e: black, with one warning line saying there is no light.
+    let out = run(&d, &[unlit, "-r", "32", "24", "--keep-fov", "-f", "black.png", "--exr", "black.exr"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(text.lines().filter(|l| l.contains("warning")).count(), 1, "{text}");
+    assert!(text.contains("no light"), "{text}");
+    assert!(read_exr(&d.join("black.exr")).unwrap().pixels.iter().all(|p| *p == glam::Vec3::ZERO));
+    // With a uniform map of radiance 1: lit; every escaping camera ray sees exactly 1.
+    let env = d.join("white.exr");
+    write_env(&env, glam::Vec3::ONE);
+    let lit = render_exr(&d, "lit", &[unlit, "-e", env.to_str().unwrap(), "-r", "32", "24", "--keep-fov", "-s", "4", "-m", "2"]);
+    assert!(lit.pixels.iter().any(|p| *p == glam::Vec3::ONE), "no pixel sees the environment");
+    assert!(lit.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
+    // A missing map and a file that is not OpenEXR: one line naming the file, no output.
+    let junk = d.join("junk.exr");
+    std::fs::write(&junk, b"not an exr").unwrap();
+    for (file, needle) in [(d.join("missing.exr"), "not found"), (junk, "OpenEXR")] {
+        let out_dir = d.join("bad");
+        let _ = std::fs::remove_dir_all(&out_dir);
+        std::fs::create_dir_all(&out_dir).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).args([unlit, "-e", file.to_str().unwrap(), "-r", "8", "8"]).current_dir(&out_dir).output().unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(file.file_name().unwrap().to_str().unwrap()) && err.contains(needle) && err.trim_end().lines().count() == 1, "{err}");
+        assert!(std::fs::read_dir(&out_dir).unwrap().next().is_none(), "output written");
+    }
+}
+
+#[test]
+fn shared_dwab_environment_maps_load() {
+    // The CC0 maps in ../shared/envmaps are DWAB-compressed (lossy, with a few
+    // negative texels from ringing, which we clamp to 0).
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/envmaps");
+    assert!(dir.join("studio.exr").exists(), "test data missing: {}", dir.display());
+    for name in ["studio.exr", "courtyard.exr"] {
+        let env = pathtracer::light::EnvMap::load(&dir.join(name)).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((env.width, env.height), (1024, 512), "{name}");
+        assert!(env.texels.iter().all(|t| t.is_finite() && t.min_element() >= 0.0));
+        assert!(!env.is_black());
+    }
+}
