@@ -133,20 +133,30 @@ fn unsupported_materials_are_refused_by_name() {
 #[test]
 fn path_tracing_is_identical_across_thread_counts_and_backends() {
     let d = scratch("pt-determinism");
-    let base = ["-s", "4", "-m", "3", "-r", "64", "48", "--seed", "3"];
+    identical_everywhere(&d, "builtin", &["-s", "4", "-m", "3", "-r", "64", "48", "--seed", "3"]);
+    // Glass meshes, an environment map and a thin lens: more draws per path.
+    let gems = common::scene_path("sky", "CBgems");
+    let env = d.join("sky.exr");
+    let texels = (0..128).map(|i| glam::Vec3::new(0.2 + (i % 16) as f32 * 0.1, 0.5, if i == 37 { 40.0 } else { 0.3 })).collect();
+    pathtracer::image_io::write_exr(&env, &pathtracer::image_io::Rgb { width: 16, height: 8, pixels: texels }).unwrap();
+    identical_everywhere(&d, "gems", &[gems.to_str().unwrap(), "-e", env.to_str().unwrap(), "-b", "0.05", "-d", "4", "-s", "4", "-m", "6", "-r", "64", "48", "--keep-fov", "--seed", "3"]);
+}
+
+fn identical_everywhere(d: &Path, tag: &str, base: &[&str]) {
     let with = |extra: &[&str]| -> Vec<String> { base.iter().chain(extra).map(|s| s.to_string()).collect() };
     let args_ref = with(&["-t", "1", "--backend", "native"]);
-    let reference = render_exr(&d, "ref", &args_ref.iter().map(String::as_str).collect::<Vec<_>>());
+    let reference = render_exr(d, &format!("{tag}_ref"), &args_ref.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(reference.pixels.iter().all(|p| p.is_finite()));
+    assert!(reference.pixels.iter().any(|p| *p != glam::Vec3::ZERO), "{tag}: black image");
     let mut variants = vec![("t2", vec!["-t", "2", "--backend", "native"]), ("brute", vec!["-t", "2", "--backend", "brute"])];
     if pathtracer::accel::embree::available() {
         variants.push(("embree", vec!["-t", "2", "--backend", "embree"]));
     }
     for (name, extra) in variants {
         let args = with(&extra);
-        let img = render_exr(&d, name, &args.iter().map(String::as_str).collect::<Vec<_>>());
+        let img = render_exr(d, &format!("{tag}_{name}"), &args.iter().map(String::as_str).collect::<Vec<_>>());
         let differing = img.pixels.iter().zip(&reference.pixels).filter(|(a, b)| a != b).count();
-        assert_eq!(differing, 0, "{name}: {differing} pixels differ from -t 1 native");
+        assert_eq!(differing, 0, "{tag} {name}: {differing} pixels differ from -t 1 native");
     }
 }
 
