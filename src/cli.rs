@@ -143,6 +143,13 @@ const DEMO_DEPTH: u32 = 5;
 
 /// Entry point for the binary: one line on error, non-zero exit, no panic.
 pub fn main() -> ExitCode {
+    // Die quietly on a closed pipe (`pathtracer ... | head`), as Unix tools do,
+    // instead of panicking in println!.
+    #[cfg(unix)]
+    // SAFETY: restoring the default disposition of one signal before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

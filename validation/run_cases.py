@@ -14,10 +14,13 @@ Two kinds of case:
 
 References are cached under validation/out/cache by a hash of the exported scene and the
 render settings.
+
+Modules: cases.py (the tiers and their cases), stats.py (verdicts), metrics.py (relMSE, FLIP,
+equal-time ratios), images.py (EXR/PNG files), report.py (the HTML report); one script per
+reference renderer (mitsuba_ref.py, cycles_ref.py, pov_ref.py); this file runs the cases.
 """
 import argparse
 import hashlib
-import html
 import json
 import os
 import shutil
@@ -31,40 +34,10 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 import stats  # noqa: E402
-
-BATCHES = 8
-REF_COLOURS = {"native": "#d62728", "embree": "#1f77b4", "mitsuba": "#2ca02c", "cycles": "#ff7f0e", "povray": "#9467bd"}
-
-
-def radiance(scene, m, refs, flags=(), label=None, spp_scale=1, ref_shift=None, scene_flags=(), tag=""):
-    """spp_scale multiplies our spp: hemisphere sampling finds a small light with few samples,
-    and its per-pixel means are far from normal (most batches see 0-2 light hits) until there
-    are many. scene_flags change the scene itself (-e environment map, -b/-d thin lens): they go
-    to the export too, so the references render the same scene; tag names the case apart."""
-    return {"kind": "radiance", "scene": scene, "m": m, "refs": refs, "flags": list(flags), "label": label, "spp_scale": spp_scale, "ref_shift": ref_shift,
-            "scene_flags": list(scene_flags), "tag": tag}
-
-
-def envmap(name):
-    """An environment map from ../shared/envmaps (CC0, see its SOURCE.md); missing data stops the run."""
-    p = os.path.join(ROOT, "..", "shared", "envmaps", name)
-    if not os.path.exists(p):
-        sys.exit(f"run_cases: environment map {p} not found (../shared/envmaps)")
-    return os.path.abspath(p)
-
-
-def geometry(scene, ref_shift=None):
-    return {"kind": "geometry", "scene": scene, "ref_shift": ref_shift}
-
-
-def adaptive(scene, m, refs, batch, tol, bias_runs):
-    """Adaptive sampling (-a batch tol, at the tier's spp as the maximum): the converged image
-    against the references, samples saved against uniform sampling at equal error, and the
-    bias of CS184's stopping rule against the pilot variant over `bias_runs` short runs of a
-    rare-path configuration (-H -m 1: a pixel whose first batch saw no light hit stops, dark)."""
-    return {"kind": "adaptive", "scene": scene, "m": m, "refs": refs, "batch": batch, "tol": tol, "bias_runs": bias_runs, "ref_shift": None}
-
-
+from cases import BATCHES, TIERS, find_scene  # noqa: E402
+from images import read_exr, to_png, write_png, write_zmap  # noqa: E402
+from metrics import equal_time_ratio, flip_error, from_renders, interp_loglog, rel_mse  # noqa: E402
+from report import write_report  # noqa: E402
 def normalise_export(src, dst):
     """A copy of an exported scene moved and scaled into the references' comfort zone: moved
     by a multiple of 1024 (and of 4 extents) towards the origin, then scaled by a power of two to a size of
@@ -132,113 +105,11 @@ def normalise_export(src, dst):
     return dst, scale
 
 
-CB = "CBspheres_lambertian.dae"
-BOTH = ["mitsuba", "cycles"]
-ALL = BOTH + ["povray"]  # POV-Ray: direct lighting only
-TIERS = {
-    # width, height, our spp, reference spp per render, reference renders, spp ladder, cases
-    "quick": dict(w=64, h=48, spp=256, ref_spp=128, ref_renders=16, ladder=[4, 16, 64], pov_supersample=4, pov_lightlets=8, cases=[
-        radiance(CB, 1, ALL),
-        radiance(CB, 1, ["cycles"], ["-H"], "hemisphere sampling", spp_scale=16),
-        radiance(CB, 5, BOTH),
-        radiance("CBempty.dae", 3, BOTH),
-        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="normalise"),
-        radiance("CBspheres.dae", 5, BOTH, label="mirror and glass"),
-        radiance("bunny_unlit.dae", 3, BOTH, label="environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_studio"),
-        adaptive(CB, 5, ["cycles"], 32, 0.05, 12),
-        geometry(CB),
-        geometry("hard_tiny.dae"),
-    ]),
-    "full": dict(w=256, h=192, spp=1024, ref_spp=256, ref_renders=16, ladder=[4, 16, 64, 256], pov_supersample=2, pov_lightlets=16, cases=[
-        radiance(CB, 1, ALL),
-        radiance(CB, 1, BOTH, ["-H"], "hemisphere sampling", spp_scale=16),
-        radiance(CB, 2, BOTH),
-        radiance(CB, 5, BOTH),
-        radiance("CBempty.dae", 1, ALL),
-        radiance("CBempty.dae", 3, BOTH),
-        radiance("CBbunny.dae", 5, BOTH),
-        radiance("bunny.dae", 3, ["cycles"], label="hemisphere light"),
-        adaptive(CB, 5, BOTH, 64, 0.05, 24),
-        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="normalise"),
-        radiance("hard_tiny.dae", 3, BOTH, label="hard case: scaled by 1e-3", ref_shift="normalise"),
-        radiance("hard_huge.dae", 3, BOTH, label="hard case: scaled by 1e3", ref_shift="normalise"),
-        radiance("hard_grazing.dae", 3, BOTH, label="hard case: light 1e-4 under the ceiling"),
-        radiance("hard_slab.dae", 3, BOTH, label="hard case: 1e-4-thick slab"),
-        radiance("CBspheres.dae", 5, BOTH, label="mirror and glass"),
-        radiance("CBspheres_refract.dae", 5, BOTH, label="mirror and CS184 refraction"),
-        radiance("CBgems.dae", 5, BOTH, label="tinted glass gems"),
-        radiance("CBcoil.dae", 5, BOTH, label="mirror coil (reflectance 0.3)"),
-        radiance("CBspheres_microfacet_al_ag.dae", 5, BOTH, label="microfacet Al and Ag"),
-        radiance("CBbunny_microfacet_cu.dae", 5, BOTH, label="microfacet Cu"),
-        radiance("bunny_unlit.dae", 3, BOTH, label="environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_studio"),
-        radiance("bunny_microfacet_cu_unlit.dae", 3, BOTH, label="microfacet Cu under courtyard.exr", scene_flags=["-e", envmap("courtyard.exr")], tag="_env_courtyard"),
-        radiance(CB, 5, BOTH, label="thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens"),
-        geometry(CB),
-        geometry("CBbunny.dae"),
-        geometry("hard_offset.dae", ref_shift="normalise"),
-        geometry("hard_tiny.dae", ref_shift="normalise"),
-        geometry("hard_huge.dae", ref_shift="normalise"),
-        geometry("hard_slab.dae"),
-        geometry("hard_grazing.dae"),
-    ]),
-}
-
-
-def find_scene(name):
-    for d in [os.path.join(ROOT, "scenes"), os.path.join(HERE, "scenes"), os.path.join(ROOT, "..", "shared", "scenes", "cs184", "sky")]:
-        p = os.path.join(d, name)
-        if os.path.exists(p):
-            return p
-    sys.exit(f"run_cases: scene {name} not found (looked in scenes/, validation/scenes/ and ../shared/scenes/cs184/sky)")
-
-
 def sh(cmd, **kw):
     r = subprocess.run(cmd, capture_output=True, text=True, **kw)
     if r.returncode != 0:
         sys.exit(f"run_cases: {' '.join(cmd)} failed:\n{r.stdout[-3000:]}{r.stderr[-3000:]}")
     return r.stdout
-
-
-def read_exr(path):
-    import mitsuba as mi
-
-    return np.array(mi.Bitmap(path), dtype=np.float64)[..., :3]
-
-
-def write_exr(path, img):
-    import mitsuba as mi
-
-    mi.Bitmap(np.asarray(img, dtype=np.float32)).write(path)
-
-
-def to_png(img):
-    """CS184's tone step, to compare images by eye."""
-    return np.clip(np.power(np.maximum(img, 0) * np.sqrt(2.0), 1 / 2.2), 0, 1)
-
-
-def write_png(path, rgb01):
-    import mitsuba as mi
-
-    mi.Bitmap((np.clip(rgb01, 0, 1) * 255).astype(np.uint8), pixel_format=mi.Bitmap.PixelFormat.RGB).write(path)
-
-
-def write_zmap(path, z):
-    """Blue (z <= -4) .. white (0) .. red (z >= 4), per pixel the worst channel."""
-    zz = np.take_along_axis(z, np.argmax(np.abs(z), axis=-1)[..., None], -1)[..., 0]
-    t = np.clip(zz / 4.0, -1, 1)
-    write_png(path, np.stack([1 - np.clip(-t, 0, 1), 1 - np.abs(t), 1 - np.clip(t, 0, 1)], -1))
-
-
-def from_renders(imgs, meta):
-    """A reference from its independent renders: their mean, the per-pixel variance of that
-    mean, each render's image mean (for the global test), the renders and their total time."""
-    stack = np.stack(imgs)
-    return {"mean": stack.mean(axis=0), "var": stack.var(axis=0, ddof=1) / len(imgs), "image_means": [float(i.mean()) for i in imgs],
-            "renders": imgs, "seconds": sum(p["seconds"] for p in meta["renders"])}
-
-
-def rel_mse(x, r):
-    return float(np.mean((x - r) ** 2 / (r * r + 1e-2)))
 
 
 class Harness:
@@ -678,175 +549,6 @@ def geometry_vs_cycles(cid, name, backend, ours, cyc, folder, cam):
     out["summary"] = (f"{out['silhouette_pixels_differing']} silhouette pixels differ, {out['id_mismatches_off_silhouette']} id mismatches elsewhere; "
                       f"interior {out['interior_pixels']} px: depth {100*out['depth_pass_fraction']:.2f} %, normal {100*out['normal_pass_fraction']:.2f} % pass")
     return out
-
-
-def interp_loglog(points, y):
-    """x at which the piecewise log-log line through (y_i, x_i), sorted by y, reaches y; None
-    outside the range (segments with a value <= 0 are skipped)."""
-    pts = sorted(points)
-    for (y0, x0), (y1, x1) in zip(pts, pts[1:]):
-        if y0 <= y <= y1 and y1 > y0 > 0 and x0 > 0 and x1 > 0:
-            a = (np.log(y) - np.log(y0)) / (np.log(y1) - np.log(y0))
-            return float(np.exp(np.log(x0) + a * (np.log(x1) - np.log(x0))))
-    return None
-
-
-def flip_error(x, r):
-    """Mean FLIP (NVIDIA's flip-evaluator, LDR mode) between the CS184 tone-mapped images; None
-    when the package is missing."""
-    try:
-        import flip_evaluator as flip
-    except ImportError:
-        return None
-    a = to_png(x).astype(np.float32)
-    b = to_png(r).astype(np.float32)
-    _, mean, _ = flip.evaluate(b, a, "LDR")
-    return float(mean)
-
-
-def equal_time_ratio(ours, theirs):
-    """relMSE(ours) / relMSE(theirs) at equal render time: both curves interpolated
-    log-log at the geometric mean of the overlapping time range. None without overlap."""
-    def at(curve, t):
-        return interp_loglog([(p["seconds"], p["rel_mse"]) for p in curve], t)
-    if not ours or not theirs:
-        return None
-    lo = max(min(p["seconds"] for p in ours), min(p["seconds"] for p in theirs))
-    hi = min(max(p["seconds"] for p in ours), max(p["seconds"] for p in theirs))
-    if not (hi > lo > 0):
-        return None
-    t = float(np.sqrt(lo * hi))
-    a, b = at(ours, t), at(theirs, t)
-    return {"seconds": t, "ratio": a / b} if a and b else None
-
-
-def svg_curves(series, width=360, height=240):
-    """A log-log plot of relMSE against seconds, as inline SVG."""
-    pts = [(p["seconds"], p["rel_mse"]) for _, c, _ in series for p in c if p["seconds"] > 0 and p["rel_mse"] > 0]
-    if not pts:
-        return ""
-    lx = [np.log10(t) for t, _ in pts]
-    ly = [np.log10(e) for _, e in pts]
-    x0, x1, y0, y1 = min(lx) - 0.1, max(lx) + 0.1, min(ly) - 0.1, max(ly) + 0.1
-    px = lambda v: 40 + (np.log10(v) - x0) / (x1 - x0) * (width - 50)
-    py = lambda v: height - 30 - (np.log10(v) - y0) / (y1 - y0) * (height - 40)
-    parts = [f'<svg width="{width}" height="{height}" class="curve"><rect x="40" y="10" width="{width-50}" height="{height-40}" fill="none" stroke="#999"/>',
-             f'<text x="{width/2}" y="{height-5}" font-size="11">render time (s, log)</text><text x="2" y="20" font-size="11">relMSE</text>',
-             f'<text x="40" y="{height-18}" font-size="9">{10**x0:.2g}</text><text x="{width-40}" y="{height-18}" font-size="9">{10**x1:.2g}</text>',
-             f'<text x="2" y="{height-30}" font-size="9">{10**y0:.1e}</text><text x="2" y="40" font-size="9">{10**y1:.1e}</text>']
-    for i, (name, c, colour) in enumerate(series):
-        line = " ".join(f"{px(p['seconds']):.1f},{py(p['rel_mse']):.1f}" for p in sorted(c, key=lambda p: p["seconds"]) if p["seconds"] > 0 and p["rel_mse"] > 0)
-        parts.append(f'<polyline points="{line}" fill="none" stroke="{colour}" stroke-width="2"/>')
-        parts.append(f'<text x="{width-110}" y="{25+14*i}" font-size="11" fill="{colour}">{html.escape(name)}</text>')
-    parts.append("</svg>")
-    return "".join(parts)
-
-
-def region_cell(r):
-    """The region whose mean differs most, as ours ± CI vs the reference's, in a tooltip-free
-    compact form; every region is in summary.json."""
-    regs = r.get("regions") or []
-    if not regs:
-        return "-"
-    g = max(regs, key=lambda q: abs(q["z"]))
-    return (f"{len(regs)} regions, worst z {g['z']:+.2f}:<br>{g['mean']:.5g}&plusmn;{g['ci95']:.2g} vs "
-            f"{g['reference_mean']:.5g}&plusmn;{g['reference_ci95']:.2g}")
-
-
-def write_report(out, summary):
-    esc = html.escape
-    rad = [r for r in summary["results"] if r["kind"] in ("radiance", "adaptive")]
-    ada = [r for r in summary["results"] if r["kind"] == "adaptive"]
-    bias = [r for r in summary["results"] if r["kind"] == "adaptive_bias"]
-    geo = [r for r in summary["results"] if r["kind"] == "geometry"]
-    rows = []
-    for r in rad:
-        title = esc(r["case"] + (f" ({r['label']})" if r.get("label") else ""))
-        if "refused" in r:
-            rows.append(f"<tr data-result><td>{title}</td><td>-</td><td>{esc(r['reference'])}</td><td class='refused' colspan='11'>reference refuses: {esc(r['refused'])}</td></tr>")
-            continue
-        c = r["case"]
-        img = r.get("image", r["backend"])
-        flip = f"{r['flip']:.4f}" if r.get("flip") is not None else "n/a"
-        ok = r.get("verdict_passed", r["passed"])
-        verdict, cls = ("pass", "pass") if ok else (("biased (expected)", "refused") if r.get("informational") else ("FAIL", "fail"))
-        rows.append(
-            f"<tr data-result><td>{title}</td><td>{r['backend']}</td><td>{esc(r['reference_renderer'])}</td><td class='{cls}'>{verdict}</td>"
-            f"<td>{100 * r['pass_fraction']:.2f} %</td><td>{r['global_z']:+.2f}</td><td>{100 * (r['relative_mean_difference'] or 0):+.3f} %</td><td>{r['rel_mse']:.2e}</td>"
-            f"<td>{r['smape']:.4f}</td><td>{flip}</td><td>{region_cell(r)}</td><td><img src='{esc(c)}/{img}.png'></td><td><img src='{esc(c)}/{r['reference']}.png'></td>"
-            f"<td><img src='{esc(c)}/{img}_{r['reference']}_z.png'></td></tr>")
-    grows = []
-    for r in geo:
-        imgs = "".join(f"<img src='{esc(r['case'])}/{esc(i)}'>" for i in r.get("images", []))
-        grows.append(f"<tr data-result><td>{esc(r['case'])}</td><td>{r['backend']}</td><td>{r['reference']}</td><td class='{'pass' if r['passed'] else 'fail'}'>{'pass' if r['passed'] else 'FAIL'}</td>"
-                     f"<td style='text-align:left'>{esc(r['summary'])}</td><td>{imgs}</td></tr>")
-    arows = []
-    for r in ada:
-        a = r["adaptive_single"]
-        eq = r["uniform_spp_at_equal_error"]
-        arows.append(f"<tr><td>{esc(r['case'])} ({r['rule']} rule)</td><td>{r['backend']}</td><td>{r['reference']}</td><td>{a['samples_per_pixel']:.1f} / {r['spp']}</td><td>{a['rel_mse']:.2e}</td>"
-                     f"<td>{'%.1f' % eq if eq else 'outside the ladder'}</td><td>{'%.0f %%' % (100 * r['samples_saved']) if r['samples_saved'] is not None else '-'}</td>"
-                     f"<td>{'%.0f %%' % (100 * r['time_saved']) if r['time_saved'] is not None else '-'}</td><td><img src='{esc(r['case'])}/{r['image']}_rate.png'></td></tr>")
-    for r in bias:
-        b = r["bias"]
-        arows.append(f"<tr data-result><td>{esc(r['case'])}</td><td>{r['backend']}</td><td>{r['reference']}</td><td colspan='5' style='text-align:left'>stopping-rule bias, {esc(r['config'])}: "
-                     f"CS184 rule {100*b['cs184']['relative_bias']:+.2f} % &plusmn; {100*b['cs184']['se_relative']:.2f} % (t {b['cs184']['t']:+.1f}); "
-                     f"pilot {100*b['pilot']['relative_bias']:+.2f} % &plusmn; {100*b['pilot']['se_relative']:.2f} % (t {b['pilot']['t']:+.1f}, critical {r['t_critical']:.2f})</td>"
-                     f"<td class='{'pass' if r['passed'] else 'fail'}'>{'pilot unbiased: pass' if r['passed'] else 'FAIL'}</td></tr>")
-    curves, eff_rows = [], []
-    for case in sorted({r["case"] for r in rad if "refused" not in r and r["kind"] == "radiance"}):
-        rs = [r for r in rad if r["case"] == case and "refused" not in r]
-        series = []
-        for r in rs:
-            if r["reference"] == rs[0]["reference"]:
-                series.append((r["backend"], r["curve"], REF_COLOURS.get(r["backend"], "#333")))
-        for ref in sorted({r["reference"] for r in rs}):
-            series.append((ref, next(r for r in rs if r["reference"] == ref)["reference_curve"], REF_COLOURS.get(ref, "#333")))
-        curves.append(f"<div class='plot'><h3>{esc(case)}</h3><p>against {esc(rs[0]['reference'])}'s mean</p>{svg_curves(series)}</div>")
-        for name, c, _ in series:
-            if not c:
-                continue
-            best = max(c, key=lambda p: p["spp"])
-            eff_rows.append(f"<tr><td>{esc(case)}</td><td>{name}</td><td>{best['spp']}</td><td>{best['seconds']:.3f}</td><td>{best['rel_mse']:.2e}</td><td>{1.0/(best['rel_mse']*best['seconds']):.3g}</td></tr>")
-        for r in rs:
-            eq = r.get("equal_time_rel_mse_ratio")
-            eff_rows.append(f"<tr><td>{esc(case)}</td><td>{r['backend']} ÷ {r['reference']} at equal time</td><td colspan='4'>{'%.2f at %.3f s' % (eq['ratio'], eq['seconds']) if eq else 'no overlapping times'}</td></tr>")
-    doc = f"""<!doctype html><html><head><meta charset="utf-8"><title>pathtracer validation ({summary['tier']})</title>
-<style>body{{font-family:sans-serif}} table{{border-collapse:collapse}} td,th{{border:1px solid #999;padding:3px 6px;text-align:right}}
-img{{width:128px;image-rendering:pixelated}} .pass{{background:#cfc}} .fail{{background:#fcc}} .refused{{background:#eee;text-align:left}} .plot{{display:inline-block}}</style>
-<script>window.addEventListener("load", () => {{ const imgs = [...document.images];
-document.body.dataset.images = imgs.length; document.body.dataset.imagesOk = imgs.filter(i => i.complete && i.naturalWidth > 0).length; }});</script></head><body>
-<h1>pathtracer validation: {summary['tier']} tier</h1>
-<p>{esc(summary['pathtracer'])}. References: {esc(', '.join(summary['references']))}.</p>
-<h2>Light transport</h2>
-<p>Verdict: per pixel-channel Welch z-test (alpha 0.01, Šidák), pass at &ge; 99.75 % of pixel-channels, plus a global test of the
-image mean by batch means (ours: {BATCHES} independent renders, the reference: its independent renders; Student t, alpha 0.01).
-z-map: blue z &le; -4, white 0, red z &ge; 4. FLIP: mean LDR FLIP of the tone-mapped images (report only). Regions: a 4&times;3 grid of
-region means with 95 % confidence intervals (report only; all in summary.json).</p>
-<table id="verdicts"><tr><th>case</th><th>backend</th><th>reference</th><th>verdict</th><th>pixels passing</th><th>global t</th><th>mean diff</th>
-<th>relMSE</th><th>SMAPE</th><th>FLIP</th><th>regions</th><th>ours</th><th>reference</th><th>z-map</th></tr>
-{''.join(rows)}</table>
-<h2>Intersections</h2>
-<p>POV-Ray: one ray through each pixel centre (ours at -s 1); ids must be identical except on silhouettes (a differently coloured
-neighbour), depths equal to POV-Ray's half-float precision. Cycles: pixel averages; ids identical on interior pixels, silhouette
-coverage and interior depth and normal by the per-pixel z-test. Images: ours, reference, differences (orange: silhouette, red: failure).</p>
-<table id="geometry"><tr><th>case</th><th>backend</th><th>reference</th><th>verdict</th><th>what was found</th><th>images</th></tr>{''.join(grows)}</table>
-<h2>Adaptive sampling</h2>
-<p>One adaptive render against uniform renders at 1/8 .. 1 of the maximum: the uniform spp (and time) at the adaptive render's
-relMSE, by log-log interpolation; samples saved = 1 - adaptive samples kept / uniform samples at equal error (the pilot rule also
-spends its discarded pilot samples: compare its time saved). In the verdicts above, the CS184 rule's converged image is reported
-but not a gate: the rule decides on the samples it keeps, so its image is biased dark by design. The bias rows run a
-rare-path configuration many times with each stopping rule; the pilot rule must be unbiased, the CS184 rule's bias is reported.
-Image: the rate image (samples kept per pixel).</p>
-<table id="adaptive"><tr><th>case</th><th>backend</th><th>reference</th><th>spp kept / max</th><th>relMSE</th><th>uniform spp at equal error</th>
-<th>samples saved</th><th>time saved</th><th>rate</th></tr>{''.join(arows)}</table>
-<h2>Error against time</h2><p>relMSE against the reference's mean (its noise floor is in summary.json) along the spp ladder; render time
-excludes process start and scene loading for every renderer.</p>
-{''.join(curves)}
-<h2>Efficiency</h2><table id="efficiency"><tr><th>case</th><th>renderer</th><th>spp</th><th>seconds</th><th>relMSE</th><th>1/(relMSE·s)</th></tr>{''.join(eff_rows)}</table>
-</body></html>"""
-    with open(os.path.join(out, "report.html"), "w") as f:
-        f.write(doc)
 
 
 def main():

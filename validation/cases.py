@@ -1,0 +1,104 @@
+"""The harness's cases: what each tier renders, with which flags, against which references.
+A case is a dict made by `radiance`, `geometry` or `adaptive`; run_cases.py runs them."""
+import os
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+# Our renders per case: independent runs whose spread gives the variance of the mean.
+BATCHES = 8
+
+
+def radiance(scene, m, refs, flags=(), label=None, spp_scale=1, ref_shift=None, scene_flags=(), tag=""):
+    """spp_scale multiplies our spp: hemisphere sampling finds a small light with few samples,
+    and its per-pixel means are far from normal (most batches see 0-2 light hits) until there
+    are many. scene_flags change the scene itself (-e environment map, -b/-d thin lens): they go
+    to the export too, so the references render the same scene; tag names the case apart."""
+    return {"kind": "radiance", "scene": scene, "m": m, "refs": refs, "flags": list(flags), "label": label, "spp_scale": spp_scale, "ref_shift": ref_shift,
+            "scene_flags": list(scene_flags), "tag": tag}
+
+
+def envmap(name):
+    """An environment map from ../shared/envmaps (CC0, see its SOURCE.md); missing data stops the run."""
+    p = os.path.join(ROOT, "..", "shared", "envmaps", name)
+    if not os.path.exists(p):
+        sys.exit(f"run_cases: environment map {p} not found (../shared/envmaps)")
+    return os.path.abspath(p)
+
+
+def geometry(scene, ref_shift=None):
+    return {"kind": "geometry", "scene": scene, "ref_shift": ref_shift}
+
+
+def adaptive(scene, m, refs, batch, tol, bias_runs):
+    """Adaptive sampling (-a batch tol, at the tier's spp as the maximum): the converged image
+    against the references, samples saved against uniform sampling at equal error, and the
+    bias of CS184's stopping rule against the pilot variant over `bias_runs` short runs of a
+    rare-path configuration (-H -m 1: a pixel whose first batch saw no light hit stops, dark)."""
+    return {"kind": "adaptive", "scene": scene, "m": m, "refs": refs, "batch": batch, "tol": tol, "bias_runs": bias_runs, "ref_shift": None}
+
+
+CB = "CBspheres_lambertian.dae"
+
+
+BOTH = ["mitsuba", "cycles"]
+
+
+ALL = BOTH + ["povray"]  # POV-Ray: direct lighting only
+
+
+TIERS = {
+    # width, height, our spp, reference spp per render, reference renders, spp ladder, cases
+    "quick": dict(w=64, h=48, spp=256, ref_spp=128, ref_renders=16, ladder=[4, 16, 64], pov_supersample=4, pov_lightlets=8, cases=[
+        radiance(CB, 1, ALL),
+        radiance(CB, 1, ["cycles"], ["-H"], "hemisphere sampling", spp_scale=16),
+        radiance(CB, 5, BOTH),
+        radiance("CBempty.dae", 3, BOTH),
+        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="normalise"),
+        radiance("CBspheres.dae", 5, BOTH, label="mirror and glass"),
+        radiance("bunny_unlit.dae", 3, BOTH, label="environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_studio"),
+        adaptive(CB, 5, ["cycles"], 32, 0.05, 12),
+        geometry(CB),
+        geometry("hard_tiny.dae"),
+    ]),
+    "full": dict(w=256, h=192, spp=1024, ref_spp=256, ref_renders=16, ladder=[4, 16, 64, 256], pov_supersample=2, pov_lightlets=16, cases=[
+        radiance(CB, 1, ALL),
+        radiance(CB, 1, BOTH, ["-H"], "hemisphere sampling", spp_scale=16),
+        radiance(CB, 2, BOTH),
+        radiance(CB, 5, BOTH),
+        radiance("CBempty.dae", 1, ALL),
+        radiance("CBempty.dae", 3, BOTH),
+        radiance("CBbunny.dae", 5, BOTH),
+        radiance("bunny.dae", 3, ["cycles"], label="hemisphere light"),
+        adaptive(CB, 5, BOTH, 64, 0.05, 24),
+        radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="normalise"),
+        radiance("hard_tiny.dae", 3, BOTH, label="hard case: scaled by 1e-3", ref_shift="normalise"),
+        radiance("hard_huge.dae", 3, BOTH, label="hard case: scaled by 1e3", ref_shift="normalise"),
+        radiance("hard_grazing.dae", 3, BOTH, label="hard case: light 1e-4 under the ceiling"),
+        radiance("hard_slab.dae", 3, BOTH, label="hard case: 1e-4-thick slab"),
+        radiance("CBspheres.dae", 5, BOTH, label="mirror and glass"),
+        radiance("CBspheres_refract.dae", 5, BOTH, label="mirror and CS184 refraction"),
+        radiance("CBgems.dae", 5, BOTH, label="tinted glass gems"),
+        radiance("CBcoil.dae", 5, BOTH, label="mirror coil (reflectance 0.3)"),
+        radiance("CBspheres_microfacet_al_ag.dae", 5, BOTH, label="microfacet Al and Ag"),
+        radiance("CBbunny_microfacet_cu.dae", 5, BOTH, label="microfacet Cu"),
+        radiance("bunny_unlit.dae", 3, BOTH, label="environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_studio"),
+        radiance("bunny_microfacet_cu_unlit.dae", 3, BOTH, label="microfacet Cu under courtyard.exr", scene_flags=["-e", envmap("courtyard.exr")], tag="_env_courtyard"),
+        radiance(CB, 5, BOTH, label="thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens"),
+        geometry(CB),
+        geometry("CBbunny.dae"),
+        geometry("hard_offset.dae", ref_shift="normalise"),
+        geometry("hard_tiny.dae", ref_shift="normalise"),
+        geometry("hard_huge.dae", ref_shift="normalise"),
+        geometry("hard_slab.dae"),
+        geometry("hard_grazing.dae"),
+    ]),
+}
+
+
+def find_scene(name):
+    for d in [os.path.join(ROOT, "scenes"), os.path.join(HERE, "scenes"), os.path.join(ROOT, "..", "shared", "scenes", "cs184", "sky")]:
+        p = os.path.join(d, name)
+        if os.path.exists(p):
+            return p
+    sys.exit(f"run_cases: scene {name} not found (looked in scenes/, validation/scenes/ and ../shared/scenes/cs184/sky)")
