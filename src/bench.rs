@@ -33,7 +33,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 1 << 20)]
     pub rays: usize,
     /// Skip the render timings (normal shading with and without the BVH;
-    /// path tracing of CBbunny and CBspheres_lambertian at 64 spp, -m 5)
+    /// path tracing of CBbunny, CBspheres_lambertian, CBspheres and CBgems at 64 spp, -m 5)
     #[arg(long)]
     pub no_render: bool,
     /// Also write the throughput rows as CSV
@@ -47,8 +47,9 @@ pub struct BenchArgs {
 pub const DEFAULT_SCENES: [&str; 6] = ["cow", "maxplanck", "CBbunny", "beetle", "sphere:1M", "sphere:5M"];
 
 /// Path-traced render timing (the benchmark's last table): these scenes at
-/// 480x360, 64 spp, -m 5, every backend but brute, same seed.
-pub const RENDER_SCENES: [&str; 2] = ["CBbunny", "CBspheres_lambertian"];
+/// 480x360, 64 spp, -m 5, every backend but brute, same seed. CBspheres (mirror
+/// and glass spheres) and CBgems (glass meshes) time the delta-BSDF paths.
+pub const RENDER_SCENES: [&str; 4] = ["CBbunny", "CBspheres_lambertian", "CBspheres", "CBgems"];
 
 /// Brute force is skipped above this many primitives (hours per measurement).
 const BRUTE_LIMIT: usize = 100_000;

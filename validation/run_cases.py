@@ -144,6 +144,11 @@ class Harness:
         if case.get("ref_shift"):
             d, self.ref_scale = normalise_export(d, os.path.join(folder, "scene_ref"))
         h = hashlib.sha256()
+        # The reference scripts are part of the key: a changed exporter never reuses a
+        # reference rendered by the old one.
+        for p in ("mitsuba_ref.py", "cycles_ref.py", "pov_ref.py", "mesh_io.py"):
+            with open(os.path.join(HERE, p), "rb") as f:
+                h.update(p.encode() + f.read())
         for p in sorted(os.listdir(d)):
             with open(os.path.join(d, p), "rb") as f:
                 h.update(p.encode() + f.read())
