@@ -561,13 +561,14 @@ def main():
     ap.add_argument("tier", choices=sorted(TIERS))
     ap.add_argument("--pathtracer", default=os.path.join(ROOT, "target", "release", "pathtracer"))
     ap.add_argument("--out", default=os.path.join(HERE, "out"))
-    ap.add_argument("--only", default="", help="run only cases whose scene name contains this")
+    ap.add_argument("--only", default="", help="run only cases whose scene name (with its tag, e.g. CBspheres_lambertian.dae_lens) contains one of these comma-separated strings")
     args = ap.parse_args()
     tier = TIERS[args.tier]
     hz = Harness(args, tier)
     results = []
     for case in tier["cases"]:
-        if args.only and args.only not in case["scene"]:
+        name = case["scene"] + case.get("tag", "")
+        if args.only and not any(o in name for o in args.only.split(",")):
             continue
         {"radiance": hz.run_radiance, "geometry": hz.run_geometry, "adaptive": hz.run_adaptive}[case["kind"]](case, results)
     import mitsuba
