@@ -12,7 +12,7 @@ use pathtracer::accel::BackendKind;
 use pathtracer::camera::Camera;
 use pathtracer::light::{EnvMap, Lights};
 use pathtracer::render::{self, path::PathTracer, RenderOutput, RenderSettings};
-use pathtracer::scene::{Bsdf, Material, Scene, Shape, TriangleMesh};
+use pathtracer::scene::{Bsdf, LightDesc, LightKind, Material, Scene, Shape, TriangleMesh};
 use std::sync::Arc;
 
 fn material(name: &str, bsdf: Bsdf) -> Material {
@@ -162,7 +162,7 @@ fn test_sky() -> Arc<EnvMap> {
 
 #[test]
 fn environment_light_on_a_diffuse_plane_matches_quadrature_of_the_map() {
-    // An up-facing diffuse plane (albedo ρ) lit only by the map reflects
+    // An up-facing diffuse plane (albedo ρ) lit by the map reflects
     // ρ/π ∫_{y>0} L(ω) cos θ dω everywhere (direct light, -m 1). The
     // integral is computed by quadrature of the bilinear lookup; the render
     // uses importance sampling (with MIS), and uniform hemisphere sampling
@@ -180,13 +180,17 @@ fn environment_light_on_a_diffuse_plane_matches_quadrature_of_the_map() {
         }
     }
     let rho = 0.8f32;
-    let expected = e * rho as f64 / std::f64::consts::PI;
+    // Plus CS184's hemisphere light (radiance Lh over y > 0, irradiance π Lh on
+    // the plane): two escaping lights, each sampled on its own, MIS per light.
+    let lh = Vec3::new(0.2, 0.3, 0.4);
+    let expected = e * rho as f64 / std::f64::consts::PI + lh.as_dvec3() * rho as f64;
     let plane = TriangleMesh {
         positions: vec![Vec3::new(-50.0, 0.0, -50.0), Vec3::new(50.0, 0.0, -50.0), Vec3::new(50.0, 0.0, 50.0), Vec3::new(-50.0, 0.0, 50.0)],
         triangles: vec![[0, 2, 1], [0, 3, 2]],
         normals: vec![Vec3::Y; 4],
     };
-    let scene = scene_of(vec![(Shape::Mesh(plane), material("plane", Bsdf::Diffuse { albedo: Vec3::splat(rho) }))], vec![]);
+    let sky = LightDesc { name: "Hemi".into(), kind: LightKind::Ambient, radiance: lh, transform: glam::Mat4::IDENTITY };
+    let scene = scene_of(vec![(Shape::Mesh(plane), material("plane", Bsdf::Diffuse { albedo: Vec3::splat(rho) }))], vec![sky]);
     let cam = camera_looking(&scene, Vec3::new(0.0, 1.0, 0.0), -Vec3::Y, 20.0, 16);
     let z = z_crit(0.01, 6);
     for (hemi, spp) in [(false, 256u32), (true, 16384)] {

@@ -103,6 +103,16 @@ impl Light {
         }
     }
 
+    /// Radiance this light sends along `-dir` to a ray escaping along `dir`
+    /// (0 for lights that are not at infinity).
+    pub fn escaped(&self, dir: Vec3) -> Vec3 {
+        match self {
+            Light::Hemisphere { radiance } if dir.y > 0.0 => *radiance,
+            Light::Environment(e) => e.eval(dir),
+            _ => Vec3::ZERO,
+        }
+    }
+
     /// Solid-angle pdf of `sample` for an escaping direction (hemisphere light).
     pub fn pdf_escape(&self, dir: Vec3) -> f32 {
         match self {
@@ -291,14 +301,7 @@ impl Lights {
 
     /// Radiance of the lights a ray escaping along `dir` sees.
     pub fn escaped(&self, dir: Vec3) -> Vec3 {
-        self.lights
-            .iter()
-            .map(|l| match l {
-                Light::Hemisphere { radiance } if dir.y > 0.0 => *radiance,
-                Light::Environment(e) => e.eval(dir),
-                _ => Vec3::ZERO,
-            })
-            .sum()
+        self.lights.iter().map(|l| l.escaped(dir)).sum()
     }
 }
 

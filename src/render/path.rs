@@ -97,13 +97,22 @@ impl PathTracer<'_> {
         }
     }
 
-    /// MIS weight of a BSDF sample that escaped along `c.wi`.
-    pub(super) fn bsdf_weight_escape(&self, c: &Continuation) -> f32 {
-        if c.delta {
-            return 1.0;
-        }
-        let pl: f32 = self.lights.lights.iter().map(|l| l.pdf_escape(c.wi)).sum();
-        power_heuristic(c.pdf, self.light_samples as f32 * pl)
+    /// What a BSDF sample that escaped along `c.wi` sees: each escaping
+    /// light's radiance (hemisphere, environment) weighted against that
+    /// light's own samples, since each light is sampled on its own.
+    pub(super) fn escaped_weighted(&self, c: &Continuation) -> Vec3 {
+        self.lights
+            .lights
+            .iter()
+            .map(|l| {
+                let le = l.escaped(c.wi);
+                if le == Vec3::ZERO || c.delta {
+                    le
+                } else {
+                    le * power_heuristic(c.pdf, self.light_samples as f32 * l.pdf_escape(c.wi))
+                }
+            })
+            .sum()
     }
 
     /// Direct light reflected at `v` towards the previous vertex: the
@@ -155,7 +164,7 @@ impl Integrator for PathTracer<'_> {
             let gather = count && (!self.hemisphere || c.delta);
             let Some(next) = self.trace(&ray, rays) else {
                 if gather {
-                    l += c.beta * self.lights.escaped(c.wi) * self.bsdf_weight_escape(&c);
+                    l += c.beta * self.escaped_weighted(&c);
                 }
                 break;
             };

@@ -124,7 +124,7 @@ impl PathTracer<'_> {
                 let gather = p.counted && (!self.hemisphere || c.delta);
                 let Some(next) = found[k].map(|h| Interaction::with_barycentrics(self.scene, &closest[k], &h, self.accel.exact_barycentrics())) else {
                     if gather {
-                        p.l += c.beta * self.lights.escaped(c.wi) * self.bsdf_weight_escape(&c);
+                        p.l += c.beta * self.escaped_weighted(&c);
                     }
                     continue;
                 };
