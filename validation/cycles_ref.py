@@ -410,8 +410,10 @@ def build(spec, folder, mode):
                     refuse("a visible rectangle light without a shape")
                 # Ours: light-sampled only, not seen by any ray, not occluding.
                 add_area_lamp(f"light{i}", corner, u, v, n, l["radiance"], cam_visible=False)
-                lob = bpy.data.objects[f"light{i}"]
-                lob.visible_diffuse = lob.visible_glossy = lob.visible_transmission = False
+                # Light sampling only: no MIS, so no ray can hit the lamp. (Turning off its
+                # diffuse/glossy/transmission ray visibility instead turns off its light on
+                # those surfaces altogether: CBcoil's second light was missing, measured.)
+                bpy.data.lights[f"light{i}"].cycles.use_multiple_importance_sampling = False
             else:
                 refuse(f"light type {t}")
 

@@ -85,6 +85,11 @@ impl Bsdf {
         matches!(self, Bsdf::Mirror(_) | Bsdf::Glass(_) | Bsdf::Refraction(_))
     }
 
+    /// Whether light can cross the surface (a dielectric).
+    pub fn transmits(&self) -> bool {
+        matches!(self, Bsdf::Glass(_) | Bsdf::Refraction(_))
+    }
+
     /// f(wo, wi), without the cosine; 0 for delta models.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         match self {

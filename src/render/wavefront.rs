@@ -247,10 +247,15 @@ impl PathTracer<'_> {
         }
         let s = bsdf.sample(v.wo, rng)?;
         let wi = v.frame.to_world(s.wi);
-        // The sampled side must agree with the geometric normal's: a
-        // reflection leaving below the face (or a transmission above it),
-        // possible with shading normals, would start inside the surface.
-        if (wi.dot(v.ng) > 0.0) != (s.wi.z > 0.0) || wi.dot(v.ng) == 0.0 {
+        // With shading normals a sampled direction can leave on the other
+        // side of the face than its lobe says. A reflecting surface then
+        // ends the path: the ray would start inside the object (a leak into
+        // closed rooms). A dielectric has light on both sides anyway: the
+        // ray goes where it points, spawned on that side, as Mitsuba and
+        // Cycles do (ending such paths made CBgems 0.17 % darker than both
+        // references, measured at 256x192).
+        let side = wi.dot(v.ng);
+        if side == 0.0 || (!bsdf.transmits() && (side > 0.0) != (s.wi.z > 0.0)) {
             return None;
         }
         let mut beta_next = beta * s.weight;
