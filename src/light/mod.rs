@@ -284,6 +284,14 @@ impl Lights {
                         out.notes.push(msg);
                         continue;
                     }
+                    // Say so when an emissive surface is there too (CBcoil: a quad of
+                    // radiance 10 under an area light of 5): both then light the scene.
+                    if out.lights.iter().any(|k| matches!(k, Light::Mesh { .. })) {
+                        out.notes.push(format!(
+                            "area light '{}' (radiance {}) matches no emissive surface (same plane, place, size and radiance): it lights the scene as an invisible rectangle, beside the emissive surfaces",
+                            l.name, l.radiance
+                        ));
+                    }
                     let corner = pos - 0.5 * dx - 0.5 * dy;
                     out.lights.push(Light::Rect { corner, ex: dx, ey: dy, normal: dir, radiance: l.radiance });
                 }
