@@ -125,12 +125,14 @@ impl Camera {
     /// `(0,0)` at the bottom-left, with the clip range as its `t` range.
     #[inline]
     pub fn generate_ray(&self, x: f32, y: f32) -> Ray {
-        let p = Vec3::new(
-            (2.0 * x - 1.0) * (self.hfov_deg.to_radians() / 2.0).tan(),
-            (2.0 * y - 1.0) * (self.vfov_deg.to_radians() / 2.0).tan(),
-            -1.0,
-        );
-        Ray::with_range(self.pos, (self.c2w * p).normalize(), self.near, self.far)
+        Ray::with_range(self.pos, (self.c2w * self.image_plane_point(x, y)).normalize(), self.near, self.far)
+    }
+
+    /// The point of the image plane z = −1 (camera space) at normalised
+    /// image coordinates `(x, y)`.
+    #[inline]
+    fn image_plane_point(&self, x: f32, y: f32) -> Vec3 {
+        Vec3::new((2.0 * x - 1.0) * (self.hfov_deg.to_radians() / 2.0).tan(), (2.0 * y - 1.0) * (self.vfov_deg.to_radians() / 2.0).tan(), -1.0)
     }
 
     /// CS184's thin lens (`-b`, `-d`): the ray through normalised image
@@ -140,11 +142,7 @@ impl Camera {
     /// camera space, where the pinhole ray through the same pixel meets it.
     #[inline]
     pub fn generate_ray_thin_lens(&self, x: f32, y: f32, u: (f32, f32)) -> Ray {
-        let p = Vec3::new(
-            (2.0 * x - 1.0) * (self.hfov_deg.to_radians() / 2.0).tan(),
-            (2.0 * y - 1.0) * (self.vfov_deg.to_radians() / 2.0).tan(),
-            -1.0,
-        );
+        let p = self.image_plane_point(x, y);
         let r = self.lens_radius * u.0.sqrt();
         let phi = 2.0 * std::f32::consts::PI * u.1;
         let lens = Vec3::new(r * phi.cos(), r * phi.sin(), 0.0);

@@ -272,11 +272,11 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         Some(v) if v == 0 || v == 1 => v == 1,
         Some(v) => crate::bail!("-o {v}: expected 0 (only bounce m) or 1 (accumulate)"),
     };
-    lens_flags(a)?;
+    let lens = lens_flags(a)?;
     let threads = init_threads(a.threads)?;
 
     let scene = load_scene(a.scene.as_deref())?;
-    let camera = setup_camera(a, &scene, width, height)?;
+    let camera = setup_camera(a, &scene, width, height, lens)?;
     let env = load_environment(a)?;
     let output = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
     if let Some(p) = &a.write_camera {
@@ -400,8 +400,9 @@ fn frame_size(a: &RenderArgs) -> Result<(u32, u32)> {
     }
 }
 
-/// CS184's camera placement, then `-r` (crop, or scale with --keep-fov), then `-c`.
-fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32) -> Result<Camera> {
+/// CS184's camera placement, then `-r` (crop, or scale with --keep-fov), then
+/// `-c`, then `lens` (`-b`, `-d` from `lens_flags`).
+fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32, lens: (Option<f32>, Option<f32>)) -> Result<Camera> {
     let mut camera = Camera::from_scene(scene);
     if a.resolution.is_some() {
         if a.keep_fov {
@@ -417,7 +418,7 @@ fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32) -> Resul
         camera.screen_h = height;
     }
     // -b and -d on the command line win over a camera file's values.
-    let (b, d) = lens_flags(a)?;
+    let (b, d) = lens;
     if let Some(b) = b {
         camera.lens_radius = b;
     }
@@ -429,9 +430,10 @@ fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32) -> Resul
 
 fn run_export(a: &RenderArgs, out: &Path) -> Result<()> {
     let (width, height) = frame_size(a)?;
+    let lens = lens_flags(a)?;
     let scene = load_scene(a.scene.as_deref())?;
     check_materials(&scene)?;
-    let camera = setup_camera(a, &scene, width, height)?;
+    let camera = setup_camera(a, &scene, width, height, lens)?;
     let lights = Lights::with_environment(&scene, load_environment(a)?)?;
     crate::export::export(&scene, &camera, &lights, out)?;
     println!("{}: exported {} shapes and {} lights to {}", scene.name, scene.shapes.len(), lights.lights.len(), out.display());

@@ -118,7 +118,7 @@ fn environment_sampler_fits_its_pdf() {
     let mut t = Vec::new();
     for j in 0..h {
         for i in 0..w {
-            let v = if (i, j) == (5, 2) { Vec3::new(60.0, 50.0, 40.0) } else if i >= 10 && i < 13 { Vec3::ZERO } else { Vec3::new(0.2 + 0.1 * j as f32, 0.3, 0.1 * i as f32) };
+            let v = if (i, j) == (5, 2) { Vec3::new(60.0, 50.0, 40.0) } else if (10..13).contains(&i) { Vec3::ZERO } else { Vec3::new(0.2 + 0.1 * j as f32, 0.3, 0.1 * i as f32) };
             t.push(v);
         }
     }

@@ -314,7 +314,7 @@ fn environment_light_lights_an_unlit_scene_and_bad_maps_are_refused() {
     let env = d.join("white.exr");
     write_env(&env, glam::Vec3::ONE);
     let lit = render_exr(&d, "lit", &[unlit, "-e", env.to_str().unwrap(), "-r", "32", "24", "--keep-fov", "-s", "4", "-m", "2"]);
-    assert!(lit.pixels.iter().any(|p| *p == glam::Vec3::ONE), "no pixel sees the environment");
+    assert!(lit.pixels.contains(&glam::Vec3::ONE), "no pixel sees the environment");
     assert!(lit.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
     // A missing map and a file that is not OpenEXR: one line naming the file, no output.
     let junk = d.join("junk.exr");

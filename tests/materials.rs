@@ -112,7 +112,8 @@ fn a_camera_inside_glass_sees_the_outside_brightened_by_ior_squared() {
 fn camera_looking(scene: &Scene, pos: Vec3, forward: Vec3, fov_deg: f32, size: u32) -> Camera {
     let mut c = camera(scene, pos, size, size);
     let z = -forward.normalize();
-    let x = if z.x.abs() < 0.9 { Vec3::X.cross(z).cross(z).normalize() * -1.0 } else { Vec3::Y.cross(z).normalize() };
+    // x: the world x axis made orthogonal to z (or y × z when z is near x).
+    let x = if z.x.abs() < 0.9 { (Vec3::X - z * z.x).normalize() } else { Vec3::Y.cross(z).normalize() };
     let y = z.cross(x);
     c.c2w = Mat3::from_cols(x, y, z);
     c.hfov_deg = fov_deg;

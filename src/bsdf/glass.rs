@@ -18,7 +18,7 @@
 //! * `roughness` must be 0 (every shipped scene's is): the loader's user
 //!   refuses anything else rather than render it smooth.
 
-use super::{fresnel, reflect, refract, BsdfSample};
+use super::{fresnel, reflect, refract, relative_eta, BsdfSample};
 use glam::Vec3;
 
 #[derive(Clone, Copy, Debug)]
@@ -33,11 +33,7 @@ pub struct Glass {
 impl Glass {
     /// η_t / η_i for light crossing from `wo`'s side.
     pub fn eta(&self) -> f32 {
-        if self.front {
-            self.ior
-        } else {
-            1.0 / self.ior
-        }
+        relative_eta(self.ior, self.front)
     }
 
     /// Fresnel reflectance for `wo`.

@@ -122,6 +122,17 @@ impl Bsdf {
     }
 }
 
+/// η_t / η_i for light crossing a dielectric of index `ior` from `wo`'s
+/// side: from outside (`front`) into it, or from inside out.
+#[inline]
+pub fn relative_eta(ior: f32, front: bool) -> f32 {
+    if front {
+        ior
+    } else {
+        1.0 / ior
+    }
+}
+
 /// Mirror `w` about the local normal.
 #[inline]
 pub fn reflect(w: Vec3) -> Vec3 {

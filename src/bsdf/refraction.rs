@@ -6,7 +6,7 @@
 //! (η_i/η_t)² (pbrt, Mitsuba; see `glass`), CS184 by its inverse. For light
 //! sources outside closed refracting objects both give the same image.
 
-use super::{refract, BsdfSample};
+use super::{refract, relative_eta, BsdfSample};
 use glam::Vec3;
 
 #[derive(Clone, Copy, Debug)]
@@ -19,7 +19,7 @@ pub struct Refraction {
 
 impl Refraction {
     pub fn sample(&self, wo: Vec3) -> Option<BsdfSample> {
-        let eta = if self.front { self.ior } else { 1.0 / self.ior };
+        let eta = relative_eta(self.ior, self.front);
         let wi = refract(wo, eta)?;
         let weight = self.transmittance / (eta * eta);
         (weight != Vec3::ZERO).then_some(BsdfSample { wi, weight, pdf: 1.0, delta: true, radiance_scale: 1.0 / (eta * eta) })
