@@ -40,6 +40,22 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         out: PathBuf,
     },
+    /// Combine the partials of a split render (--part I/N --partial FILE) into
+    /// exactly the images the one-machine render writes.
+    Merge {
+        /// The partials, one per part, in any order
+        #[arg(required = true, value_name = "PARTIAL")]
+        partials: Vec<PathBuf>,
+        /// Output PNG (also writes <FILE minus extension>_rate.png)
+        #[arg(short = 'f', value_name = "FILE", required = true)]
+        output: PathBuf,
+        /// Also write the linear radiance as OpenEXR
+        #[arg(long, value_name = "FILE")]
+        exr: Option<PathBuf>,
+        /// Also write the per-pixel variance of the mean as OpenEXR
+        #[arg(long, value_name = "FILE")]
+        variance_exr: Option<PathBuf>,
+    },
     /// Error of OpenEXR images against a reference: relMSE and relative bias.
     Compare {
         /// The reference image (linear OpenEXR)
@@ -136,6 +152,26 @@ pub struct RenderArgs {
     /// Write the camera settings (CS184's six-line format) used for this render
     #[arg(long, value_name = "FILE")]
     pub write_camera: Option<PathBuf>,
+    /// Render only part I (from 0) of N of the work and write it to --partial
+    /// FILE instead of images; `pathtracer merge` makes the images from all N
+    #[arg(long, value_name = "I/N", requires = "partial")]
+    pub part: Option<String>,
+    /// The partial file --part writes
+    #[arg(long, value_name = "FILE", requires = "part")]
+    pub partial: Option<PathBuf>,
+    /// How --part divides the work: sample ranges of every pixel, or
+    /// interleaved tiles [default: samples; tiles with -a]
+    #[arg(long, value_enum, requires = "part")]
+    pub split: Option<SplitArg>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SplitArg {
+    /// Sample indices [I*S/N, (I+1)*S/N) of every pixel
+    Samples,
+    /// Tiles k of the frame with k mod N = I (pixels are independent, so
+    /// adaptive sampling stays exact)
+    Tiles,
 }
 
 const DEMO_SPP: u32 = 16;
@@ -159,7 +195,11 @@ pub fn main() -> ExitCode {
                 return ExitCode::SUCCESS;
             }
             let text = e.render().to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
+            // One line: clap's message up to its usage block, with the
+            // argument names it lists on the following lines.
+            let message = text.split("\n\nUsage").next().unwrap_or("invalid arguments");
+            let joined = message.split_whitespace().collect::<Vec<_>>().join(" ");
+            let first = joined.trim_start_matches("error: ");
             eprintln!("pathtracer: error: {first} (see --help)");
             return ExitCode::from(2);
         }
@@ -168,6 +208,9 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Bench(b)) => crate::bench::run(&b),
         Some(Command::Compare { reference, images }) => compare(&reference, &images),
+        Some(Command::Merge { partials, output, exr, variance_exr }) => {
+            crate::merge::run(&partials, &output, exr.as_deref(), variance_exr.as_deref())
+        }
         Some(Command::Export { render, out }) => run_export(&render, &out),
         None if no_arguments => {
             // The demo render: CS184's defaults (1 spp, direct light only)
@@ -273,6 +316,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         Some(v) => crate::bail!("-o {v}: expected 0 (only bounce m) or 1 (accumulate)"),
     };
     let lens = lens_flags(a)?;
+    let part = part_flags(a, spp, adaptive.is_some(), region.unwrap_or(Region { x: 0, y: 0, w: width, h: height }))?;
     let threads = init_threads(a.threads)?;
 
     let scene = load_scene(a.scene.as_deref())?;
@@ -316,10 +360,48 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             russian_roulette: !a.no_rr,
         }),
     };
-    let settings = RenderSettings { width, height, spp, seed: a.seed, region, adaptive, progress: render::progress_wanted(), batch_rays: true };
+    let mut settings = RenderSettings::new(width, height, spp, a.seed);
+    settings.region = region;
+    settings.adaptive = adaptive;
+    settings.progress = render::progress_wanted();
+    if let Some(p) = &part {
+        settings.share = p.share;
+        settings.keep_sums = true;
+    }
     let start = Instant::now();
     let out = render::render(&camera, integrator.as_ref(), &settings);
     let render_s = start.elapsed().as_secs_f64();
+    if out.bad_samples > 0 {
+        println!("{}: warning: {} samples had a NaN or out-of-range value (counted as 0 or ±2^36)", scene.name, out.bad_samples);
+    }
+    if let Some(p) = &part {
+        let header = crate::partial::Header {
+            settings: partial_settings(a, &scene, &camera, &settings, p.kind)?,
+            index: p.index,
+            count: p.count,
+            rays: out.rays,
+            render_seconds: render_s,
+            cpu_seconds: crate::partial::process_cpu_seconds(),
+            bad_samples: out.bad_samples,
+        };
+        let path = a.partial.as_deref().expect("clap requires --partial with --part");
+        crate::partial::write(path, &header, &out.sums)?;
+        println!(
+            "{} | part {}/{} ({} split) | backend {} | BVH build {:.3} s | render {:.3} s | {} rays | {:.2} Mrays/s | {} threads | wrote {}",
+            scene.name,
+            p.index,
+            p.count,
+            p.kind.name(),
+            built.accel.describe(),
+            built.build_seconds,
+            render_s,
+            out.rays,
+            out.rays as f64 / render_s.max(1e-9) / 1e6,
+            threads,
+            path.display()
+        );
+        return Ok(());
+    }
 
     image_io::write_png(&output, &out.image)?;
     let mut written = vec![output.display().to_string()];
@@ -359,6 +441,101 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         written.join(", ")
     );
     Ok(())
+}
+
+/// A checked `--part I/N`.
+struct Part {
+    index: u32,
+    count: u32,
+    kind: crate::partial::SplitKind,
+    share: render::Share,
+}
+
+/// `--part`, `--partial` and `--split`, checked against the other flags.
+fn part_flags(a: &RenderArgs, spp: u32, adaptive: bool, region: Region) -> Result<Option<Part>> {
+    use crate::partial::SplitKind;
+    let Some(text) = &a.part else { return Ok(None) };
+    let parsed = text.split_once('/').and_then(|(i, n)| Some((i.trim().parse::<u32>().ok()?, n.trim().parse::<u32>().ok()?)));
+    let (index, count) = match parsed {
+        Some((i, n)) if n >= 1 && i < n => (i, n),
+        _ => crate::bail!("--part {text}: expected I/N with 0 <= I < N (part I of N, counted from 0)"),
+    };
+    for (used, flag) in [(a.output.is_some(), "-f"), (a.exr.is_some(), "--exr"), (a.variance_exr.is_some(), "--variance-exr")] {
+        if used {
+            crate::bail!("{flag} with --part: a part writes a partial (--partial FILE); `pathtracer merge` writes the images");
+        }
+    }
+    let kind = match (a.split, adaptive) {
+        (Some(SplitArg::Samples), true) => crate::bail!(
+            "--split samples with -a: adaptive sampling decides on all of a pixel's samples, so it splits by tiles (--split tiles)"
+        ),
+        (Some(SplitArg::Samples), false) | (None, false) => SplitKind::Samples,
+        (Some(SplitArg::Tiles), _) | (None, true) => SplitKind::Tiles,
+    };
+    let share = match kind {
+        SplitKind::Samples => {
+            if count > spp {
+                crate::bail!("--part {text}: a sample split needs N <= the samples per pixel ({spp}); use fewer parts or --split tiles");
+            }
+            render::Share::samples_of(index, count, spp)
+        }
+        SplitKind::Tiles => {
+            let (cols, rows) = render::tile_grid(region);
+            if count > cols * rows {
+                crate::bail!("--part {text}: a tile split needs N <= the number of {}x{} tiles ({})", render::TILE, render::TILE, cols * rows);
+            }
+            render::Share::Tiles { index, count }
+        }
+    };
+    Ok(Some(Part { index, count, kind, share }))
+}
+
+/// Everything that changes a split render's image, for its partials'
+/// headers: parts that differ in any of it are refused by `merge`.
+fn partial_settings(
+    a: &RenderArgs,
+    scene: &Scene,
+    camera: &Camera,
+    s: &RenderSettings,
+    kind: crate::partial::SplitKind,
+) -> Result<Vec<(String, String)>> {
+    use crate::partial::sha256_hex;
+    let file_hash = |p: &Path| -> Result<String> {
+        std::fs::read(p).map(|b| sha256_hex(&b)).map_err(|e| Error::new(format!("{}: cannot read: {e}", p.display())))
+    };
+    let scene_hash = match &a.scene {
+        Some(p) => file_hash(p)?,
+        None => sha256_hex(builtin::TEXT.as_bytes()),
+    };
+    let env_hash = a.environment.as_deref().map(file_hash).transpose()?.unwrap_or_else(|| "none".into());
+    let r = s.region();
+    let adaptive = match s.adaptive {
+        None => "none".to_string(),
+        Some(ad) => format!("{} {:e} {}", ad.batch, ad.tolerance, if ad.pilot { "pilot" } else { "cs184" }),
+    };
+    let flag = |b: bool| if b { "1" } else { "0" }.to_string();
+    let kv = |k: &str, v: String| (k.to_string(), v);
+    Ok(vec![
+        kv("pathtracer", env!("CARGO_PKG_VERSION").to_string()),
+        kv("scene", scene.name.clone()),
+        kv("scene_sha256", scene_hash),
+        kv("environment_sha256", env_hash),
+        kv("camera", camera.to_settings().trim_end().replace('\n', " / ")),
+        kv("width", s.width.to_string()),
+        kv("height", s.height.to_string()),
+        kv("region", format!("{} {} {} {}", r.x, r.y, r.w, r.h)),
+        kv("spp", s.spp.to_string()),
+        kv("seed", s.seed.to_string()),
+        kv("adaptive", adaptive),
+        kv("integrator", a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
+        kv("max_depth", a.max_depth.unwrap_or(1).to_string()),
+        kv("light_samples", a.light_samples.unwrap_or(1).to_string()),
+        kv("accumulate", a.accumulate.unwrap_or(1).to_string()),
+        kv("hemisphere", flag(a.hemisphere)),
+        kv("russian_roulette", flag(!a.no_rr)),
+        kv("backend", a.backend.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
+        kv("split", kind.name().to_string()),
+    ])
 }
 
 /// `-b` and `-d`, checked.

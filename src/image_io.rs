@@ -97,14 +97,20 @@ pub fn write_rate_png(path: &Path, w: u32, h: u32, samples: &[u32], max_samples:
     write_rgba_png(path, w, h, data)
 }
 
-/// Linear 32-bit float OpenEXR (RGB).
+/// Linear 32-bit float OpenEXR (RGB): RLE-compressed 64x64 tiles, written
+/// in increasing order, so the same image always gives the same bytes (the
+/// exr crate's default order is whichever tile its threads finish first,
+/// which would make a merged split render differ from the one-machine file).
 pub fn write_exr(path: &Path, img: &Rgb) -> Result<()> {
+    use exr::prelude::*;
     atomically(path, |tmp| {
-        exr::prelude::write_rgb_file(tmp, img.width as usize, img.height as usize, |x, y| {
-            let p = img.pixels[y * img.width as usize + x];
+        let w = img.width as usize;
+        let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
+            let p = img.pixels[y * w + x];
             (p.x, p.y, p.z)
-        })
-        .map_err(|e| e.to_string())
+        });
+        let encoding = Encoding { line_order: LineOrder::Increasing, ..Encoding::FAST_LOSSLESS };
+        Image::from_encoded_channels((w, img.height as usize), encoding, channels).write().to_file(tmp).map_err(|e| e.to_string())
     })
 }
 

@@ -1,6 +1,6 @@
-//! Deterministic random numbers: one independent PCG32 stream per pixel.
+//! Deterministic random numbers: one independent PCG32 stream per pixel sample.
 //!
-//! The stream is chosen by hashing (seed, pixel), so an image depends only on
+//! The stream is chosen by hashing (seed, pixel, sample index), so an image depends only on
 //! `--seed`, never on the thread count or the order tiles are rendered in.
 
 /// PCG32 (O'Neill, XSH-RR 64/32).
@@ -32,6 +32,14 @@ impl Rng {
     /// The stream for one pixel of one render.
     pub fn for_pixel(seed: u64, x: u32, y: u32) -> Self {
         Rng::new(seed, ((y as u64) << 32) | x as u64)
+    }
+
+    /// The stream of sample `index` of one pixel: every sample starts a
+    /// stream of its own, so any range of a pixel's samples can be drawn
+    /// without the ones before it (split renders), and a sample's draws
+    /// never depend on how many its predecessors took.
+    pub fn for_sample(seed: u64, x: u32, y: u32, index: u32) -> Self {
+        Rng::new(seed ^ mix64(index as u64 ^ 0x5A3D_0E1F_0000_0000), ((y as u64) << 32) | x as u64)
     }
 
     #[inline]
@@ -66,6 +74,10 @@ mod tests {
         let c: Vec<u32> = (0..4).map({ let mut r = Rng::for_pixel(1, 3, 2); move |_| r.next_u32() }).collect();
         assert_eq!(a, b);
         assert_ne!(a, c);
+        let d: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 0); move |_| r.next_u32() }).collect();
+        let e: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 1); move |_| r.next_u32() }).collect();
+        assert_ne!(d, e);
+        assert_ne!(d, a);
     }
 
     #[test]

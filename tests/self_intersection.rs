@@ -133,3 +133,45 @@ fn shadow_rays_between_facing_surfaces_are_not_falsely_occluded() {
         }
     }
 }
+
+/// Shadow segments much longer than their target's distance from the origin:
+/// the target is stepped off the light's quad by a few ulps of its (small)
+/// position, while `t` is rounded to a few ulps of 1, so a segment that ended
+/// exactly at the target hit the light's own quad at `t == 1.0` for some rays
+/// (and differently per backend). `spawn_ray_to` ends short by
+/// `SHADOW_EPSILON` of the length; no backend may report such a ray occluded.
+#[test]
+fn long_shadow_segments_do_not_hit_the_light_they_end_on() {
+    // A small quad at the origin facing down (the light), a large one 50
+    // below it facing up (the receiver), tilted so rays arrive obliquely.
+    let quad = |c: Vec3, s: f32| {
+        let p = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(x, z)| c + s * Vec3::new(x, 0.02 * x, z));
+        let mut m = TriangleMesh { positions: p.to_vec(), triangles: vec![[0, 1, 2], [0, 2, 3]], normals: vec![] };
+        m.compute_normals();
+        Shape::Mesh(m)
+    };
+    let scene = scene_of(vec![quad(Vec3::ZERO, 0.05), quad(Vec3::new(0.0, -50.0, 0.0), 60.0)]);
+    let mut rng = Rng::new(5, 6);
+    for kind in common::backends() {
+        let accel = common::build(kind, &scene.shapes);
+        let (mut blocked, mut tried) = (0, 0);
+        for _ in 0..20000 {
+            let a = Vec3::new(100.0 * rng.uniform() - 50.0, 10.0, 100.0 * rng.uniform() - 50.0);
+            let ray = Ray::new(a, Vec3::new(100.0 * rng.uniform() - 50.0, -60.0, 100.0 * rng.uniform() - 50.0) - a);
+            let Some(h) = accel.intersect(&ray) else { continue };
+            let it = Interaction::new(&scene, &ray, &h);
+            if it.p.y > -40.0 {
+                continue;
+            }
+            let (x, z) = (0.09 * rng.uniform() - 0.045, 0.09 * rng.uniform() - 0.045);
+            let q = Vec3::new(x, 0.02 * x, z);
+            let target = pathtracer::sampling::offset_ray_origin(q, -Vec3::Y, q.abs().max_element());
+            tried += 1;
+            if accel.occluded(&it.spawn_ray_to(target)) {
+                blocked += 1;
+            }
+        }
+        assert!(tried > 5000, "{kind}: only {tried} segments");
+        assert_eq!(blocked, 0, "{kind}: {blocked} of {tried} segments occluded by the light they end on");
+    }
+}

@@ -1,9 +1,11 @@
-//! The image loop: tiles over rayon, one RNG stream per pixel, per-pixel mean
-//! and variance of the mean, progress bar, ray counts.
+//! The image loop: tiles over rayon, one random stream per pixel sample,
+//! exact per-pixel sums (so any split of the work merges to the same bits),
+//! progress bar, ray counts.
 
 pub mod aov;
 pub mod normals;
 pub mod path;
+pub mod sums;
 mod wavefront;
 
 use crate::accel::{Hit, Traversal};
@@ -11,13 +13,16 @@ use crate::camera::Camera;
 use crate::image_io::Rgb;
 use crate::ray::Ray;
 use crate::rng::Rng;
+use sums::PixelSums;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use std::io::IsTerminal;
 use std::time::Instant;
 
-const TILE: u32 = 32;
+/// Side of the square tiles the frame is rendered in (and split by, with
+/// `Split::Tiles`).
+pub const TILE: u32 = 32;
 /// Side of the pixel blocks a tile is sampled in (see `render`).
 const BLOCK: u32 = 4;
 
@@ -80,12 +85,60 @@ pub struct RenderSettings {
     /// default. Off, every ray is traced on its own. The image is the same
     /// either way.
     pub batch_rays: bool,
+    /// Render only this share of the work (a split render's part).
+    pub share: Share,
+    /// Return every pixel's exact sums (`RenderOutput::sums`), for a partial.
+    pub keep_sums: bool,
+}
+
+/// Which part of a render's work to do. Every pixel sample has its own
+/// random stream, keyed by (seed, pixel, sample index), so the parts of a
+/// split are exactly the one-machine render's samples, and their exact sums
+/// merge to its bits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Share {
+    /// All of it.
+    #[default]
+    All,
+    /// Sample indices `[lo, hi)` of every pixel (not with adaptive sampling,
+    /// whose stopping decision needs all of a pixel's samples).
+    Samples { lo: u32, hi: u32 },
+    /// The tiles `k` (in row-major tile order over the region) with
+    /// `k % count == index`: interleaved, so every part gets a fair mix of
+    /// cheap and expensive parts of the frame.
+    Tiles { index: u32, count: u32 },
+}
+
+impl Share {
+    /// Sample indices `[I·S/N, (I+1)·S/N)`: part `index` of `count` of `spp`.
+    pub fn samples_of(index: u32, count: u32, spp: u32) -> Share {
+        let at = |i: u32| (i as u64 * spp as u64 / count as u64) as u32;
+        Share::Samples { lo: at(index), hi: at(index + 1) }
+    }
+
+    /// Whether tile number `k` is rendered.
+    pub fn has_tile(&self, k: u32) -> bool {
+        match *self {
+            Share::Tiles { index, count } => k % count == index,
+            _ => true,
+        }
+    }
 }
 
 impl RenderSettings {
     pub fn new(width: u32, height: u32, spp: u32, seed: u64) -> Self {
-        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_rays: true }
+        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_rays: true, share: Share::All, keep_sums: false }
     }
+
+    /// The region rendered: `region`, or the whole frame.
+    pub fn region(&self) -> Region {
+        self.region.unwrap_or(Region { x: 0, y: 0, w: self.width, h: self.height })
+    }
+}
+
+/// The tile grid over a region: tile `k` is at column `k % cols`, row `k / cols`.
+pub fn tile_grid(region: Region) -> (u32, u32) {
+    (region.w.div_ceil(TILE), region.h.div_ceil(TILE))
 }
 
 pub struct RenderOutput {
@@ -95,6 +148,11 @@ pub struct RenderOutput {
     pub variance: Rgb,
     /// Samples taken per pixel.
     pub samples: Vec<u32>,
+    /// With `keep_sums`: every pixel's exact sums, row 0 at the top (pixels
+    /// outside a `Share::Tiles` part have none).
+    pub sums: Vec<PixelSums>,
+    /// Samples with a NaN or out-of-range channel (see `sums::SAMPLE_LIMIT`).
+    pub bad_samples: u64,
     pub rays: u64,
     pub seconds: f64,
 }
@@ -110,52 +168,47 @@ pub fn illuminance(c: Vec3) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
-struct PixelResult {
-    mean: Vec3,
-    var_of_mean: Vec3,
-    samples: u32,
-}
-
-/// Running per-pixel statistics over `n` samples.
-struct Moments {
-    /// Welford mean and sum of squared deviations, per channel.
-    mean: Vec3,
-    m2: Vec3,
-    n: u32,
-}
-
 /// One pixel's sampling state within a tile.
 struct PixelState {
     x: u32,
     y: u32,
+    /// The seed of this pixel's sample streams (the pilot has its own).
+    seed: u64,
+    /// Index of the next sample; the first is `Share::Samples`' `lo`.
+    next: u32,
     rng: Rng,
-    m: Moments,
+    sums: PixelSums,
     /// Illuminance moments for the adaptive rule.
     s1: f64,
     s2: f64,
+    /// Samples to take (at most).
     max: u32,
     done: bool,
+    bad: u64,
 }
 
 impl PixelState {
-    fn new(x: u32, y: u32, rng: Rng, max: u32) -> Self {
-        PixelState { x, y, rng, m: Moments { mean: Vec3::ZERO, m2: Vec3::ZERO, n: 0 }, s1: 0.0, s2: 0.0, max, done: max == 0 }
+    fn new(x: u32, y: u32, seed: u64, first: u32, max: u32) -> Self {
+        PixelState { x, y, seed, next: first, rng: Rng::new(0, 0), sums: PixelSums::default(), s1: 0.0, s2: 0.0, max, done: max == 0, bad: 0 }
+    }
+
+    /// Switch to the stream of the next sample.
+    fn start_sample(&mut self) {
+        self.rng = Rng::for_sample(self.seed, self.x, self.y, self.next);
+        self.next += 1;
     }
 
     /// Add a sample; with `rule`, stop by CS184's criterion, checked every
     /// `batch` samples on the samples taken so far.
     fn add(&mut self, l: Vec3, rule: Option<Adaptive>) {
-        let m = &mut self.m;
-        m.n += 1;
-        let d = l - m.mean;
-        m.mean += d / m.n as f32;
-        m.m2 += d * (l - m.mean);
+        self.bad += self.sums.add(l.to_array()) as u64;
+        let n = self.sums.n;
         let il = illuminance(l) as f64;
         self.s1 += il;
         self.s2 += il * il;
         if let Some(a) = rule {
-            if m.n % a.batch == 0 {
-                let nf = m.n as f64;
+            if n % a.batch == 0 {
+                let nf = n as f64;
                 let mu = self.s1 / nf;
                 let var = ((self.s2 - self.s1 * self.s1 / nf) / (nf - 1.0)).max(0.0);
                 if 1.96 * var.sqrt() / nf.sqrt() <= a.tolerance as f64 * mu {
@@ -163,7 +216,7 @@ impl PixelState {
                 }
             }
         }
-        if m.n >= self.max {
+        if n >= self.max {
             self.done = true;
         }
     }
@@ -171,9 +224,9 @@ impl PixelState {
 
 /// Sample every pixel of a tile up to its `max` (or until `rule` stops it),
 /// in rounds: one camera ray per unfinished pixel per round, traced as one
-/// coherent batch. Each pixel draws from its own stream in the order a
-/// pixel-at-a-time loop would (jitter, then the path, sample after sample),
-/// so the image does not depend on batching, tiling or threads.
+/// coherent batch. Each sample draws from its own stream (jitter, then the
+/// path), so the image does not depend on batching, tiling, threads or how
+/// the samples are split between processes.
 fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: &mut [PixelState], rule: Option<Adaptive>, rays: &mut u64) {
     let (w, h) = (s.width as f32, s.height as f32);
     let accel = integ.accel();
@@ -185,6 +238,7 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         batch.clear();
         for &i in &active {
             let p = &mut px[i];
+            p.start_sample();
             let (jx, jy) = if s.spp == 1 { (0.5, 0.5) } else { p.rng.uniform2() };
             let (x, y) = ((p.x as f32 + jx) / w, (p.y as f32 + jy) / h);
             // A pinhole draws nothing more: `-b 0` images are those of a
@@ -222,51 +276,44 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
 /// Seed tag of the pilot streams, so pilot samples never reuse image samples.
 const PILOT_TAG: u64 = 0x7069_6c6f_7420_5f5f;
 
-/// The pixels `(x, y)` of one tile, in frame coordinates.
-fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixels: &[(u32, u32)]) -> (Vec<PixelResult>, u64) {
+/// The pixels `(x, y)` of one tile, in frame coordinates: their sums, the
+/// number of out-of-range samples and the rays traced.
+fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixels: &[(u32, u32)]) -> (Vec<PixelSums>, u64, u64) {
     let mut rays = 0u64;
-    let fresh = |max: &dyn Fn(usize) -> u32| -> Vec<PixelState> {
-        pixels.iter().enumerate().map(|(i, &(x, y))| PixelState::new(x, y, Rng::for_pixel(s.seed, x, y), max(i))).collect()
+    let (lo, hi) = match s.share {
+        Share::Samples { lo, hi } => (lo, hi),
+        _ => (0, s.spp),
     };
     let px = match s.adaptive {
         Some(a) if a.pilot => {
             // Kirk and Arvo's two-stage sampling: decide the count on pilot
             // samples, throw them away, average fresh ones. The stopping
             // decision is then independent of the samples averaged: unbiased.
-            let mut pilot: Vec<PixelState> =
-                pixels.iter().map(|&(x, y)| PixelState::new(x, y, Rng::for_pixel(s.seed ^ PILOT_TAG, x, y), s.spp)).collect();
+            let mut pilot: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.seed ^ PILOT_TAG, 0, s.spp)).collect();
             sample_tile(camera, integ, s, &mut pilot, Some(a), &mut rays);
-            let mut px = fresh(&|i| pilot[i].m.n);
+            let mut px: Vec<PixelState> =
+                pixels.iter().zip(&pilot).map(|(&(x, y), p)| PixelState::new(x, y, s.seed, 0, p.sums.n)).collect();
             sample_tile(camera, integ, s, &mut px, None, &mut rays);
             px
         }
         rule => {
-            let mut px = fresh(&|_| s.spp);
+            let mut px: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.seed, lo, hi - lo)).collect();
             sample_tile(camera, integ, s, &mut px, rule, &mut rays);
             px
         }
     };
-    let out = px
-        .iter()
-        .map(|p| {
-            let m = &p.m;
-            let var_of_mean = if m.n > 1 { m.m2 / (m.n as f32 * (m.n - 1) as f32) } else { Vec3::ZERO };
-            PixelResult { mean: m.mean, var_of_mean, samples: m.n }
-        })
-        .collect();
-    (out, rays)
+    let bad = px.iter().map(|p| p.bad).sum();
+    (px.into_iter().map(|p| p.sums).collect(), bad, rays)
 }
 
-/// Render `settings.region` (or the whole frame) with `integ`.
+/// Render `settings.region` (or the whole frame) with `integ`: all of it, or
+/// the share `settings.share` names.
 pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings) -> RenderOutput {
     let start = Instant::now();
-    let region = settings.region.unwrap_or(Region { x: 0, y: 0, w: settings.width, h: settings.height });
-    let mut tiles = Vec::new();
-    for ty in (0..region.h).step_by(TILE as usize) {
-        for tx in (0..region.w).step_by(TILE as usize) {
-            tiles.push((tx, ty));
-        }
-    }
+    let region = settings.region();
+    let (cols, rows) = tile_grid(region);
+    let tiles: Vec<(u32, u32)> =
+        (0..cols * rows).filter(|&k| settings.share.has_tile(k)).map(|k| ((k % cols) * TILE, (k / cols) * TILE)).collect();
     let bar = if settings.progress {
         let b = ProgressBar::with_draw_target(Some(tiles.len() as u64), ProgressDrawTarget::stderr());
         b.set_style(ProgressStyle::with_template("{bar:40} {percent:>3}% tiles {pos}/{len} eta {eta}").unwrap());
@@ -276,7 +323,7 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
     };
     // Local (x, y) count from the region's top-left; the frame's y runs up
     // from the bottom, so local row ly is frame row region.y + region.h - 1 - ly.
-    let done: Vec<(Vec<(u32, u32)>, Vec<PixelResult>, u64)> = tiles
+    let done: Vec<(Vec<(u32, u32)>, Vec<PixelSums>, u64, u64)> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let mut local = Vec::with_capacity((TILE * TILE) as usize);
@@ -295,24 +342,59 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
                     }
                 }
             }
-            let (results, rays) = render_tile(camera, integ, settings, &frame);
+            let (sums, bad, rays) = render_tile(camera, integ, settings, &frame);
             bar.inc(1);
-            (local, results, rays)
+            (local, sums, bad, rays)
         })
         .collect();
     bar.finish_and_clear();
-    let mut image = Rgb::new(region.w, region.h);
-    let mut variance = Rgb::new(region.w, region.h);
-    let mut samples = vec![0u32; (region.w * region.h) as usize];
-    let mut rays = 0;
-    for (local, results, tile_rays) in done {
-        for ((lx, ly), p) in local.into_iter().zip(results) {
+    let mut out = RenderOutput {
+        image: Rgb::new(region.w, region.h),
+        variance: Rgb::new(region.w, region.h),
+        samples: vec![0u32; (region.w * region.h) as usize],
+        sums: if settings.keep_sums { vec![PixelSums::default(); (region.w * region.h) as usize] } else { Vec::new() },
+        bad_samples: 0,
+        rays: 0,
+        seconds: 0.0,
+    };
+    for (local, sums, bad, tile_rays) in done {
+        for ((lx, ly), p) in local.into_iter().zip(sums) {
             let i = (ly * region.w + lx) as usize;
-            image.pixels[i] = p.mean;
-            variance.pixels[i] = p.var_of_mean;
-            samples[i] = p.samples;
+            out.set_pixel(i, &p);
+            if settings.keep_sums {
+                out.sums[i] = p;
+            }
         }
-        rays += tile_rays;
+        out.bad_samples += bad;
+        out.rays += tile_rays;
     }
-    RenderOutput { image, variance, samples, rays, seconds: start.elapsed().as_secs_f64() }
+    out.seconds = start.elapsed().as_secs_f64();
+    out
+}
+
+impl RenderOutput {
+    /// The images of a render from every pixel's sums (`merge` makes its
+    /// output with this, so it writes exactly what the render would have).
+    pub fn from_sums(width: u32, height: u32, sums: Vec<PixelSums>) -> RenderOutput {
+        let mut out = RenderOutput {
+            image: Rgb::new(width, height),
+            variance: Rgb::new(width, height),
+            samples: vec![0u32; (width * height) as usize],
+            sums: Vec::new(),
+            bad_samples: 0,
+            rays: 0,
+            seconds: 0.0,
+        };
+        for (i, p) in sums.iter().enumerate() {
+            out.set_pixel(i, p);
+        }
+        out.sums = sums;
+        out
+    }
+
+    fn set_pixel(&mut self, i: usize, p: &PixelSums) {
+        self.image.pixels[i] = Vec3::from_array(p.mean());
+        self.variance.pixels[i] = Vec3::from_array(p.var_of_mean());
+        self.samples[i] = p.n;
+    }
 }

@@ -26,6 +26,10 @@ pub struct Interaction {
     pub prim_id: u32,
 }
 
+/// The fraction of a shadow segment left out at its target end (pbrt-v4's
+/// `ShadowEpsilon`).
+pub const SHADOW_EPSILON: f32 = 1e-4;
+
 impl Interaction {
     pub fn new(scene: &Scene, ray: &Ray, hit: &Hit) -> Self {
         Self::with_barycentrics(scene, ray, hit, false)
@@ -107,10 +111,15 @@ impl Interaction {
     }
 
     /// A segment from the surface to `target` (already stepped off its own
-    /// surface): the half-open range (0, 1] ends exactly at the target.
+    /// surface), ending `SHADOW_EPSILON` of its length short of the target.
+    /// Why short: the target's offset from its surface is a few ulps of its
+    /// position, while a hit's `t` is rounded to a few ulps of 1, so over a
+    /// long segment the target's own surface could still be hit at
+    /// `t == 1.0` — by one backend and not another (a CBgems pixel differed
+    /// between native and Embree). pbrt-v4 ends shadow rays the same way.
     pub fn spawn_ray_to(&self, target: Vec3) -> Ray {
         let n = if (target - self.p).dot(self.ng) >= 0.0 { self.ng } else { -self.ng };
         let o = offset_ray_origin(self.p, n, self.magnitude);
-        Ray::with_range(o, target - o, 0.0, 1.0)
+        Ray::with_range(o, target - o, 0.0, 1.0 - SHADOW_EPSILON)
     }
 }

@@ -117,7 +117,7 @@ impl Frustum {
         debug_assert_eq!(W, 8);
         let rows = n.bounds.as_ptr() as *const f32;
         let mut t0 = _mm256_set1_ps(self.tmin);
-        let mut t1 = _mm256_set1_ps(tmax);
+        let mut t1 = _mm256_set1_ps(tmax * ROBUST_SCALE);
         for a in 0..3 {
             let (o_lo, o_hi) = (_mm256_set1_ps(self.o_lo[a]), _mm256_set1_ps(self.o_hi[a]));
             let (i_lo, i_hi) = (_mm256_set1_ps(self.inv_lo[a]), _mm256_set1_ps(self.inv_hi[a]));
@@ -180,7 +180,7 @@ impl RaysSoA {
         let mut mask = 0u64;
         for half in (0..PACKET).step_by(8) {
             let mut t0 = _mm256_loadu_ps(self.tmin.as_ptr().add(half));
-            let mut t1 = _mm256_loadu_ps(tmax.as_ptr().add(half));
+            let mut t1 = _mm256_mul_ps(_mm256_loadu_ps(tmax.as_ptr().add(half)), scale);
             for a in 0..3 {
                 let lo = _mm256_set1_ps(n.bounds[f.near_plane[a]][lane]);
                 let hi = _mm256_set1_ps(n.bounds[(f.near_plane[a] + 3) % 6][lane]);
@@ -207,7 +207,7 @@ impl RaysSoA {
         use std::arch::x86_64::*;
         let scale = _mm512_set1_ps(ROBUST_SCALE);
         let mut t0 = _mm512_loadu_ps(self.tmin.as_ptr());
-        let mut t1 = _mm512_loadu_ps(tmax.as_ptr());
+        let mut t1 = _mm512_mul_ps(_mm512_loadu_ps(tmax.as_ptr()), scale);
         for a in 0..3 {
             let lo = _mm512_set1_ps(n.bounds[f.near_plane[a]][lane]);
             let hi = _mm512_set1_ps(n.bounds[(f.near_plane[a] + 3) % 6][lane]);

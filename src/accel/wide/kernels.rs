@@ -47,7 +47,9 @@ impl Slab {
 
     /// Bit i set when child i's box is entered in [tmin, tmax]; `near` gets
     /// entry distances. Every path does the same per-lane operations: the
-    /// far distance enlarged by `ROBUST_SCALE`, and `max(tn, t0)` /
+    /// far distance and `tmax` enlarged by `ROBUST_SCALE` (a rounded-up entry
+    /// distance must not cull a primitive hit at exactly `tmax`, which the
+    /// range `(tmin, tmax]` includes: a shadow ray's end on a light), and `max(tn, t0)` /
     /// `min(tf, t1)` returning their second operand when the first is NaN.
     #[inline(always)]
     pub(super) fn test<const W: usize, const AVX: bool>(&self, n: &Node<W>, tmin: f32, tmax: f32, near: &mut [f32; W]) -> u32 {
@@ -59,7 +61,7 @@ impl Slab {
                 // SAFETY: the caller runs with AVX2 enabled; rows are 32 bytes
                 // and the node is 64-byte aligned.
                 let mut t0 = _mm256_set1_ps(tmin);
-                let mut t1 = _mm256_set1_ps(tmax);
+                let mut t1 = _mm256_set1_ps(tmax * ROBUST_SCALE);
                 let scale = _mm256_set1_ps(ROBUST_SCALE);
                 for a in 0..3 {
                     let o = _mm256_set1_ps(self.o[a]);
@@ -77,7 +79,7 @@ impl Slab {
             let mut mask = 0;
             for c in (0..W).step_by(4) {
                 let mut t0 = _mm_set1_ps(tmin);
-                let mut t1 = _mm_set1_ps(tmax);
+                let mut t1 = _mm_set1_ps(tmax * ROBUST_SCALE);
                 let scale = _mm_set1_ps(ROBUST_SCALE);
                 for a in 0..3 {
                     let o = _mm_set1_ps(self.o[a]);
@@ -107,7 +109,7 @@ impl Slab {
     pub(super) fn test_scalar<const W: usize>(&self, n: &Node<W>, tmin: f32, tmax: f32, near: &mut [f32; W]) -> u32 {
         let mut mask = 0;
         for lane in 0..W {
-            let (mut t0, mut t1) = (tmin, tmax);
+            let (mut t0, mut t1) = (tmin, tmax * ROBUST_SCALE);
             for a in 0..3 {
                 let lo = n.bounds[self.near_plane[a]][lane];
                 let hi = n.bounds[(self.near_plane[a] + 3) % 6][lane];

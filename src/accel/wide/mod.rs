@@ -406,7 +406,8 @@ fn pop_within(stack: &[MaybeUninit<(u32, f32)>; STACK], sp: &mut usize, tmax: f3
         *sp -= 1;
         // SAFETY: every entry below the stack height was written.
         let (code, dist) = unsafe { stack[*sp].assume_init() };
-        if dist <= tmax {
+        // Scaled as the box tests scale it (`Slab::test`).
+        if dist <= tmax * crate::accel::bvh::ROBUST_SCALE {
             return Some(code);
         }
     }

@@ -8,6 +8,7 @@ use crate::accel::brute::BruteForce;
 use crate::bench::{camera_rays, procedural_scene, random_rays};
 use crate::camera::Camera;
 use crate::rng::Rng;
+use crate::scene::TriangleMesh;
 
 /// A small mesh with a sphere inside it, so leaves hold both kinds.
 fn shapes() -> Vec<Shape> {
@@ -373,4 +374,68 @@ fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
     }
     let far_hits = hits[hits.len() - 24..].iter().filter(|h| h.is_some_and(|h| h.geom_id as usize >= shapes.len() - 3)).count();
     assert!(far_hits >= 12, "only {far_hits} of 24 rays aimed at the far meshes hit them");
+}
+
+/// A hit at exactly `tmax` is in the range `(tmin, tmax]`: a shadow ray
+/// ending on a light's flat quad must see it (or not) as brute force does.
+/// Box entry distances rounded up past `tmax` once culled such hits (a
+/// CBgems pixel differed between native and brute). Rays towards points on
+/// flat axis-aligned quads (zero-thickness boxes), `tmax` set to the exact
+/// `t` brute force finds, in every mode.
+#[test]
+fn a_hit_at_exactly_tmax_is_found_in_every_mode() {
+    let mut mesh = TriangleMesh { positions: Vec::new(), triangles: Vec::new(), normals: Vec::new() };
+    let mut rng = Rng::new(11, 2);
+    for q in 0..40 {
+        let c = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 6.0 - 3.0;
+        let (a, b) = match q % 3 {
+            0 => (Vec3::X, Vec3::Z),
+            1 => (Vec3::Y, Vec3::Z),
+            _ => (Vec3::X, Vec3::Y),
+        };
+        let s = 0.2 + rng.uniform();
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend([c - a * s - b * s, c + a * s - b * s, c + a * s + b * s, c - a * s + b * s]);
+        mesh.triangles.extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
+    }
+    mesh.compute_normals();
+    let quads = mesh.positions.clone();
+    let shapes = vec![Shape::Mesh(mesh)];
+    let brute = BruteForce::new(&shapes);
+    let mut rays = Vec::new();
+    while rays.len() < 4096 {
+        let o = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 10.0 - 5.0;
+        let q = 4 * (rng.next_u32() as usize % 40);
+        let (u, v) = rng.uniform2();
+        let target = quads[q] + (quads[q + 1] - quads[q]) * u + (quads[q + 3] - quads[q]) * v;
+        let mut r = Ray::with_range(o, target - o, 0.0, f32::INFINITY);
+        if let Some(h) = brute.intersect(&r) {
+            r.tmax = h.t;
+            rays.push(r);
+        }
+    }
+    let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
+    assert!(want.iter().all(|h| h.is_some()));
+    let mut candidates: Vec<(&str, Box<dyn Traversal>)> =
+        vec![("4-wide", Box::new(WideBvh::<4>::build(&shapes))), ("8-wide", Box::new(WideBvh::<8>::build(&shapes)))];
+    let mut interleaved = WideBvh::<8>::build(&shapes);
+    interleaved.interleave = interleaved.avx;
+    candidates.push(("8-wide interleaved", Box::new(interleaved)));
+    if avx512_on() {
+        let mut wide = WideBvh::<8>::build(&shapes);
+        wide.avx512 = true;
+        candidates.push(("8-wide AVX-512 packets", Box::new(wide)));
+    }
+    for (name, b) in &candidates {
+        let single = rays.iter().zip(&want).filter(|(r, w)| b.intersect(r) != **w || !b.occluded(r)).count();
+        let mut hits = vec![None; rays.len()];
+        let mut occ = vec![false; rays.len()];
+        b.intersect_coherent(&rays, &mut hits);
+        b.occluded_coherent(&rays, &mut occ);
+        let coherent = hits.iter().zip(&want).zip(&occ).filter(|((h, w), o)| h != w || !**o).count();
+        b.intersect_batch(&rays, &mut hits);
+        b.occluded_batch(&rays, &mut occ);
+        let batch = hits.iter().zip(&want).zip(&occ).filter(|((h, w), o)| h != w || !**o).count();
+        assert_eq!((single, coherent, batch), (0, 0, 0), "{name}: hits at exactly tmax missed (single, coherent, batch)");
+    }
 }
