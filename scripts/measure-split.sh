@@ -35,7 +35,7 @@ measure() {
     local t
     t="$( { TIMEFORMAT='%R %U %S'; time "$@" >/dev/null; } 2>&1 | tail -1)"
     read -r wall user sys <<<"$t"
-    cpu="$(echo "$user + $sys" | bc -l)"
+    cpu="$(awk -v u="$user" -v s="$sys" 'BEGIN { print u + s }')"
 }
 
 cpu_model="$(lscpu | sed -n 's/^Model name: *//p' | head -1)"
@@ -49,13 +49,14 @@ for n in $ns; do
     total_wall=0; total_cpu=0
     for ((i = 0; i < n; i++)); do
         measure "$pt" "${args[@]}" -t "$threads" --part "$i/$n" --partial "$work/n$n/part-$i.ptp"
-        total_wall="$(echo "$total_wall + $wall" | bc -l)"; total_cpu="$(echo "$total_cpu + $cpu" | bc -l)"
+        total_wall="$(awk -v a="$total_wall" -v b="$wall" 'BEGIN { print a + b }')"
+        total_cpu="$(awk -v a="$total_cpu" -v b="$cpu" 'BEGIN { print a + b }')"
     done
     size="$(du -cb "$work/n$n"/part-*.ptp | tail -1 | cut -f1)"
     measure "$pt" merge "$work/n$n"/part-*.ptp -f "$work/n$n/one.png" --exr "$work/n$n/one.exr" --variance-exr "$work/n$n/onev.exr"
     same=yes
     for f in one.png one_rate.png one.exr onev.exr; do cmp -s "$work/$f" "$work/n$n/$f" || same=NO; done
     printf '%-24s %9.2f %9.2f %12.3f %14.1f %10.2f %9s\n' "N=$n split (summed)" "$total_wall" "$total_cpu" \
-        "$(echo "$total_cpu / $one_cpu" | bc -l)" "$(echo "$size / 1000000" | bc -l)" "$wall" "$same"
+        "$(awk -v a="$total_cpu" -v b="$one_cpu" 'BEGIN { print a / b }')" "$(awk -v a="$size" 'BEGIN { print a / 1e6 }')" "$wall" "$same"
     [[ "$same" == yes ]] || { echo "measure-split: the merged images differ from the one-machine render" >&2; exit 1; }
 done

@@ -39,8 +39,9 @@ if [[ "${PT_SLURM_E2E_INSIDE:-}" != 1 ]]; then
     exec unshare --net --pid --mount --fork --mount-proc "$0" "$@"
 fi
 
-t_start=$(date +%s.%N)
-log() { printf '%6.1fs  %s\n' "$(echo "$(date +%s.%N) - $t_start" | bc)" "$*"; }
+t_start=$(date +%s%N)
+since() { awk -v a="$1" -v b="$(date +%s%N)" 'BEGIN { printf "%.1f", (b - a) / 1e9 }'; }
+log() { printf '%6ss  %s\n' "$(since "$t_start")" "$*"; }
 fail() { log "FAILED: $*"; dump_logs; exit 1; }
 
 S="$(mktemp -d /tmp/pt-slurm-e2e.XXXXXX)"
@@ -182,9 +183,9 @@ log "(a) PASS: N=8 array $jid + merge $mid: PNG, rate PNG, EXR and variance EXR 
 # Parts long enough to be killed mid-render (about 4 s each on one core).
 scene_b=(-r 160 120 -s 256 -m 4 -t 1 --seed 9)
 mkdir -p "$S/work/local-b" "$S/work/b"
-t0=$(date +%s.%N)
+t0=$(date +%s%N)
 "$pt" "${scene_b[@]}" -f "$S/work/local-b/img.png" --exr "$S/work/local-b/img.exr" --variance-exr "$S/work/local-b/var.exr" >/dev/null
-log "(b) local render: $(echo "$(date +%s.%N) - $t0" | bc | cut -c1-5) s"
+log "(b) local render: $(since "$t0") s"
 (cd "$S/work/b" && "$repo/scripts/slurm-render.sh" -n 4 --job-dir "$S/work/b/job" -- "${scene_b[@]}" -f img.png --exr img.exr --variance-exr var.exr) >/dev/null
 read -r jid mid < "$S/work/b/job/job-ids"
 # Wait until two tasks render, one on each node.

@@ -154,7 +154,7 @@ pub struct RenderArgs {
     pub write_camera: Option<PathBuf>,
     /// Render only part I (from 0) of N of the work and write it to --partial
     /// FILE instead of images; `pathtracer merge` makes the images from all N
-    #[arg(long, value_name = "I/N", requires = "partial")]
+    #[arg(long, value_name = "I/N", requires = "partial", allow_hyphen_values = true)]
     pub part: Option<String>,
     /// The partial file --part writes
     #[arg(long, value_name = "FILE", requires = "part")]

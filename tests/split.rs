@@ -143,7 +143,7 @@ fn merge_refuses_incomplete_duplicated_overlapping_and_foreign_sets() {
     part(2, 4, "seed.ptp", &["--seed", "9"]);
     let e = merge(&["p0.ptp", "p1.ptp", "seed.ptp", "p3.ptp"]);
     assert!(e.contains("not parts of the same render") && e.contains("seed (0 vs 9)"), "{e}");
-    part(2, 4, "tiles.ptp", &["--split", "tiles"]);
+    part(1, 2, "tiles.ptp", &["--split", "tiles"]);
     let e = merge(&["p0.ptp", "p1.ptp", "tiles.ptp", "p3.ptp"]);
     assert!(e.contains("split (samples vs tiles)"), "{e}");
     // Damaged, foreign and absent files.
