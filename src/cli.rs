@@ -606,6 +606,9 @@ fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32, lens: (O
 }
 
 fn run_export(a: &RenderArgs, out: &Path) -> Result<()> {
+    if a.part.is_some() {
+        crate::bail!("--part applies to rendering; export writes the whole scene");
+    }
     let (width, height) = frame_size(a)?;
     let lens = lens_flags(a)?;
     let scene = load_scene(a.scene.as_deref())?;

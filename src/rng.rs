@@ -29,11 +29,6 @@ impl Rng {
         r
     }
 
-    /// The stream for one pixel of one render.
-    pub fn for_pixel(seed: u64, x: u32, y: u32) -> Self {
-        Rng::new(seed, ((y as u64) << 32) | x as u64)
-    }
-
     /// The stream of sample `index` of one pixel: every sample starts a
     /// stream of its own, so any range of a pixel's samples can be drawn
     /// without the ones before it (split renders), and a sample's draws
@@ -69,15 +64,15 @@ mod tests {
 
     #[test]
     fn streams_differ_and_repeat() {
-        let a: Vec<u32> = (0..4).map({ let mut r = Rng::for_pixel(1, 2, 3); move |_| r.next_u32() }).collect();
-        let b: Vec<u32> = (0..4).map({ let mut r = Rng::for_pixel(1, 2, 3); move |_| r.next_u32() }).collect();
-        let c: Vec<u32> = (0..4).map({ let mut r = Rng::for_pixel(1, 3, 2); move |_| r.next_u32() }).collect();
+        let a: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 0); move |_| r.next_u32() }).collect();
+        let b: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 0); move |_| r.next_u32() }).collect();
+        let c: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 3, 2, 0); move |_| r.next_u32() }).collect();
         assert_eq!(a, b);
         assert_ne!(a, c);
-        let d: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 0); move |_| r.next_u32() }).collect();
-        let e: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 1); move |_| r.next_u32() }).collect();
-        assert_ne!(d, e);
+        let d: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 1); move |_| r.next_u32() }).collect();
+        let e: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(2, 2, 3, 0); move |_| r.next_u32() }).collect();
         assert_ne!(d, a);
+        assert_ne!(e, a);
     }
 
     #[test]

@@ -33,25 +33,27 @@ impl Fixed {
 
     /// `v` on the 2^-96 grid, truncated toward zero. `|v|` must be below
     /// 2^95 (callers pass at most 2^72).
+    #[inline]
     pub fn from_f64(v: f64) -> Fixed {
         debug_assert!(v.is_finite() && v.abs() < 2f64.powi(95), "{v}");
         let bits = v.to_bits();
         let exp_bits = ((bits >> 52) & 0x7ff) as i32;
-        let frac = bits & ((1u64 << 52) - 1);
-        // v = m * 2^e with m < 2^53.
-        let (mut m, e) = if exp_bits == 0 { (frac, -1074) } else { (frac | 1 << 52, exp_bits - 1075) };
-        let mut shift = e + Self::FRACTION_BITS;
-        if shift < 0 {
-            m = if -shift >= 64 { 0 } else { m >> -shift };
-            shift = 0;
+        if exp_bits == 0 {
+            // Zero or subnormal (< 2^-1022): below the grid.
+            return Fixed::ZERO;
         }
-        let mut limbs = [0u64; 3];
-        let (limb, off) = ((shift / 64) as usize, (shift % 64) as u32);
-        limbs[limb] = m << off;
-        if off > 0 && limb + 1 < 3 {
-            limbs[limb + 1] = m >> (64 - off);
-        }
-        let f = Fixed(limbs);
+        // |v| = m * 2^(pos - 96): m's lowest bit lands on grid bit `pos`.
+        let m = (bits & ((1u64 << 52) - 1)) | 1 << 52;
+        let pos = exp_bits - 1075 + Self::FRACTION_BITS;
+        let (lo, hi): (u128, u64) = if pos <= 0 {
+            ((if pos > -64 { m >> -pos } else { 0 }) as u128, 0)
+        } else if pos < 128 {
+            // m has 53 bits: it spills into the top limb once pos > 75.
+            ((m as u128) << pos, if pos > 75 { m >> (128 - pos) } else { 0 })
+        } else {
+            (0, m << (pos - 128))
+        };
+        let f = Fixed([lo as u64, (lo >> 64) as u64, hi]);
         if v < 0.0 {
             f.neg()
         } else {
@@ -66,11 +68,11 @@ impl Fixed {
 
     #[inline]
     pub fn add(self, o: Fixed) -> Fixed {
-        let (a, c0) = self.0[0].overflowing_add(o.0[0]);
-        let (b, c1) = self.0[1].overflowing_add(o.0[1]);
-        let (b, c1b) = b.overflowing_add(c0 as u64);
-        let c = self.0[2].wrapping_add(o.0[2]).wrapping_add((c1 | c1b) as u64);
-        Fixed([a, b, c])
+        let a = self.0[0] as u128 | (self.0[1] as u128) << 64;
+        let b = o.0[0] as u128 | (o.0[1] as u128) << 64;
+        let (lo, carry) = a.overflowing_add(b);
+        let hi = self.0[2].wrapping_add(o.0[2]).wrapping_add(carry as u64);
+        Fixed([lo as u64, (lo >> 64) as u64, hi])
     }
 
     fn is_negative(self) -> bool {
