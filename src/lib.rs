@@ -17,6 +17,7 @@ pub mod partial;
 pub mod ray;
 pub mod render;
 pub mod rng;
+pub mod sampler;
 pub mod sampling;
 pub mod scene;
 
