@@ -140,9 +140,13 @@ pub struct RenderArgs {
     /// then discarded (unbiased; CS184's rule decides on the samples it keeps)
     #[arg(long, requires = "adaptive")]
     pub adaptive_pilot: bool,
-    /// Seed of the per-pixel random streams
+    /// Seed of the per-pixel sample draws
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Where each sample's random numbers come from: Owen-scrambled Sobol
+    /// points (stratified) or independent uniform numbers
+    #[arg(long, value_enum, default_value_t = SamplerArg::Sobol)]
+    pub sampler: SamplerArg,
     /// Also write the linear radiance as OpenEXR
     #[arg(long, value_name = "FILE")]
     pub exr: Option<PathBuf>,
@@ -163,6 +167,14 @@ pub struct RenderArgs {
     /// interleaved tiles [default: samples; tiles with -a]
     #[arg(long, value_enum, requires = "part")]
     pub split: Option<SplitArg>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SamplerArg {
+    /// Owen-scrambled, shuffled Sobol points, one sequence per draw (Burley 2020)
+    Sobol,
+    /// Independent uniform random numbers (CS184's kind; for A/B comparisons)
+    Independent,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -364,6 +376,10 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     settings.region = region;
     settings.adaptive = adaptive;
     settings.progress = render::progress_wanted();
+    settings.sampler = match a.sampler {
+        SamplerArg::Sobol => crate::sampler::SamplerKind::Sobol,
+        SamplerArg::Independent => crate::sampler::SamplerKind::Independent,
+    };
     if let Some(p) = &part {
         settings.share = p.share;
         settings.keep_sums = true;
@@ -526,6 +542,7 @@ fn partial_settings(
         kv("region", format!("{} {} {} {}", r.x, r.y, r.w, r.h)),
         kv("spp", s.spp.to_string()),
         kv("seed", s.seed.to_string()),
+        kv("sampler", a.sampler.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("adaptive", adaptive),
         kv("integrator", a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("max_depth", a.max_depth.unwrap_or(1).to_string()),

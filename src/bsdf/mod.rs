@@ -120,6 +120,29 @@ impl Bsdf {
             Bsdf::Microfacet(b) => b.sample(wo, rng.uniform2()),
         }
     }
+
+    /// Which numbers `sample_with` uses: (the lobe choice, the 2D draw).
+    pub fn draws(&self) -> (bool, bool) {
+        match self {
+            Bsdf::Diffuse(_) | Bsdf::Microfacet(_) => (false, true),
+            Bsdf::Glass(_) => (true, false),
+            Bsdf::Mirror(_) | Bsdf::Refraction(_) => (false, false),
+        }
+    }
+
+    /// `sample` with the numbers given: `lobe` picks between reflection and
+    /// transmission (glass), `u` is the direction's 2D draw; each model uses
+    /// only what it needs, so the integrator can give both fixed slots.
+    pub fn sample_with(&self, wo: Vec3, lobe: f32, u: (f32, f32)) -> Option<BsdfSample> {
+        debug_assert!(lobe >= 0.0 && u.0 >= 0.0);
+        match self {
+            Bsdf::Diffuse(b) => b.sample(wo, u),
+            Bsdf::Mirror(b) => b.sample(wo),
+            Bsdf::Glass(b) => b.sample(wo, lobe),
+            Bsdf::Refraction(b) => b.sample(wo),
+            Bsdf::Microfacet(b) => b.sample(wo, u),
+        }
+    }
 }
 
 /// η_t / η_i for light crossing a dielectric of index `ior` from `wo`'s

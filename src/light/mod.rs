@@ -122,6 +122,11 @@ impl Light {
         }
     }
 
+    /// Whether `sample` uses its `u_sel` (to pick a triangle of a mesh).
+    pub fn uses_selection(&self) -> bool {
+        matches!(self, Light::Mesh { .. })
+    }
+
     /// Sample light arriving at `p`. `u` are two uniforms, `u_sel` a third
     /// (triangle selection). `None` when the sample carries no light (the
     /// back of a one-sided emitter, a degenerate configuration).

@@ -7,7 +7,7 @@
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
 use crate::ray::Ray;
-use crate::rng::Rng;
+use crate::sampler::Sampler;
 use glam::Vec3;
 
 /// Distance from the camera to the first hit along the ray (not the planar
@@ -21,7 +21,7 @@ impl Integrator for Depth<'_> {
         self.accel
     }
 
-    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, _rng: &mut Rng, _rays: &mut u64) -> Vec3 {
+    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
         match hit {
             Some(hit) => Vec3::splat(hit.t * ray.dir.length()),
             None => Vec3::ZERO,
@@ -40,7 +40,7 @@ impl Integrator for ObjectId<'_> {
         self.accel
     }
 
-    fn radiance_from(&self, _ray: &Ray, hit: Option<Hit>, _rng: &mut Rng, _rays: &mut u64) -> Vec3 {
+    fn radiance_from(&self, _ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
         match hit {
             Some(hit) => id_colour(hit.geom_id),
             None => Vec3::ZERO,

@@ -12,7 +12,7 @@ use crate::accel::{Hit, Traversal};
 use crate::camera::Camera;
 use crate::image_io::Rgb;
 use crate::ray::Ray;
-use crate::rng::Rng;
+use crate::sampler::{Sampler, SamplerKind};
 use sums::PixelSums;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -35,14 +35,14 @@ pub trait Integrator: Sync {
     fn accel(&self) -> &dyn Traversal;
 
     /// Radiance along `ray`, whose closest hit in `(tmin, tmax]` is `hit`.
-    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, rng: &mut Rng, rays: &mut u64) -> Vec3;
+    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3;
 
-    /// `out[i]` = `radiance_from(&rays[i], hits[i], rngs[i], ..)` for a batch
+    /// `out[i]` = `radiance_from(&rays[i], hits[i], samplers[i], ..)` for a batch
     /// of camera rays; integrators that trace further rays may batch them
     /// (the path tracer does, bounce by bounce), with identical results.
-    fn radiance_batch(&self, rays: &[Ray], hits: &[Option<Hit>], rngs: &mut [&mut Rng], out: &mut [Vec3], ray_count: &mut u64) {
+    fn radiance_batch(&self, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
         for i in 0..rays.len() {
-            out[i] = self.radiance_from(&rays[i], hits[i], rngs[i], ray_count);
+            out[i] = self.radiance_from(&rays[i], hits[i], samplers[i], ray_count);
         }
     }
 }
@@ -85,6 +85,8 @@ pub struct RenderSettings {
     /// default. Off, every ray is traced on its own. The image is the same
     /// either way.
     pub batch_rays: bool,
+    /// Where each sample's random numbers come from.
+    pub sampler: SamplerKind,
     /// Render only this share of the work (a split render's part).
     pub share: Share,
     /// Return every pixel's exact sums (`RenderOutput::sums`), for a partial.
@@ -127,7 +129,7 @@ impl Share {
 
 impl RenderSettings {
     pub fn new(width: u32, height: u32, spp: u32, seed: u64) -> Self {
-        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_rays: true, share: Share::All, keep_sums: false }
+        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_rays: true, sampler: SamplerKind::Sobol, share: Share::All, keep_sums: false }
     }
 
     /// The region rendered: `region`, or the whole frame.
@@ -172,11 +174,10 @@ pub fn illuminance(c: Vec3) -> f32 {
 struct PixelState {
     x: u32,
     y: u32,
-    /// The seed of this pixel's sample streams (the pilot has its own).
-    seed: u64,
     /// Index of the next sample; the first is `Share::Samples`' `lo`.
     next: u32,
-    rng: Rng,
+    /// This pixel's draws (the pilot's are seeded apart).
+    sampler: Sampler,
     sums: PixelSums,
     /// Illuminance moments for the adaptive rule.
     s1: f64,
@@ -188,13 +189,13 @@ struct PixelState {
 }
 
 impl PixelState {
-    fn new(x: u32, y: u32, seed: u64, first: u32, max: u32) -> Self {
-        PixelState { x, y, seed, next: first, rng: Rng::new(0, 0), sums: PixelSums::default(), s1: 0.0, s2: 0.0, max, done: max == 0, bad: 0 }
+    fn new(x: u32, y: u32, kind: SamplerKind, seed: u64, spp: u32, first: u32, max: u32) -> Self {
+        PixelState { x, y, next: first, sampler: Sampler::for_pixel(kind, seed, x, y, spp), sums: PixelSums::default(), s1: 0.0, s2: 0.0, max, done: max == 0, bad: 0 }
     }
 
-    /// Switch to the stream of the next sample.
+    /// Switch to the draws of the next sample.
     fn start_sample(&mut self) {
-        self.rng = Rng::for_sample(self.seed, self.x, self.y, self.next);
+        self.sampler.start(self.next);
         self.next += 1;
     }
 
@@ -239,11 +240,11 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         for &i in &active {
             let p = &mut px[i];
             p.start_sample();
-            let (jx, jy) = if s.spp == 1 { (0.5, 0.5) } else { p.rng.uniform2() };
+            let (jx, jy) = if s.spp == 1 { (0.5, 0.5) } else { p.sampler.camera() };
             let (x, y) = ((p.x as f32 + jx) / w, (p.y as f32 + jy) / h);
             // A pinhole draws nothing more: `-b 0` images are those of a
             // camera without a lens, bit for bit.
-            batch.push(if camera.has_lens() { camera.generate_ray_thin_lens(x, y, p.rng.uniform2()) } else { camera.generate_ray(x, y) });
+            batch.push(if camera.has_lens() { camera.generate_ray_thin_lens(x, y, p.sampler.lens()) } else { camera.generate_ray(x, y) });
         }
         hits.clear();
         hits.resize(batch.len(), None);
@@ -251,11 +252,11 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         if s.batch_rays {
             accel.intersect_coherent(&batch, &mut hits);
             // `active` lists exactly the unfinished pixels, in order.
-            let mut rngs: Vec<&mut Rng> = px.iter_mut().filter(|p| !p.done).map(|p| &mut p.rng).collect();
-            debug_assert_eq!(rngs.len(), active.len());
+            let mut samplers: Vec<&mut Sampler> = px.iter_mut().filter(|p| !p.done).map(|p| &mut p.sampler).collect();
+            debug_assert_eq!(samplers.len(), active.len());
             radiance.clear();
             radiance.resize(batch.len(), Vec3::ZERO);
-            integ.radiance_batch(&batch, &hits, &mut rngs, &mut radiance, rays);
+            integ.radiance_batch(&batch, &hits, &mut samplers, &mut radiance, rays);
             for (k, &i) in active.iter().enumerate() {
                 px[i].add(radiance[k], rule);
             }
@@ -265,7 +266,7 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
             }
             for (k, &i) in active.iter().enumerate() {
                 let p = &mut px[i];
-                let l = integ.radiance_from(&batch[k], hits[k], &mut p.rng, rays);
+                let l = integ.radiance_from(&batch[k], hits[k], &mut p.sampler, rays);
                 p.add(l, rule);
             }
         }
@@ -289,15 +290,15 @@ fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixe
             // Kirk and Arvo's two-stage sampling: decide the count on pilot
             // samples, throw them away, average fresh ones. The stopping
             // decision is then independent of the samples averaged: unbiased.
-            let mut pilot: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.seed ^ PILOT_TAG, 0, s.spp)).collect();
+            let mut pilot: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.sampler, s.seed ^ PILOT_TAG, s.spp, 0, s.spp)).collect();
             sample_tile(camera, integ, s, &mut pilot, Some(a), &mut rays);
             let mut px: Vec<PixelState> =
-                pixels.iter().zip(&pilot).map(|(&(x, y), p)| PixelState::new(x, y, s.seed, 0, p.sums.n)).collect();
+                pixels.iter().zip(&pilot).map(|(&(x, y), p)| PixelState::new(x, y, s.sampler, s.seed, s.spp, 0, p.sums.n)).collect();
             sample_tile(camera, integ, s, &mut px, None, &mut rays);
             px
         }
         rule => {
-            let mut px: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.seed, lo, hi - lo)).collect();
+            let mut px: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.sampler, s.seed, s.spp, lo, hi - lo)).collect();
             sample_tile(camera, integ, s, &mut px, rule, &mut rays);
             px
         }

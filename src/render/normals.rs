@@ -3,7 +3,7 @@
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
 use crate::ray::Ray;
-use crate::rng::Rng;
+use crate::sampler::Sampler;
 use crate::scene::{Interaction, Scene};
 use glam::Vec3;
 
@@ -17,7 +17,7 @@ impl Integrator for NormalShading<'_> {
         self.accel
     }
 
-    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, _rng: &mut Rng, _rays: &mut u64) -> Vec3 {
+    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
         match hit {
             Some(hit) => Interaction::new(self.scene, ray, &hit).ns * 0.5 + Vec3::splat(0.5),
             None => Vec3::ZERO,

@@ -28,7 +28,7 @@ use crate::accel::{Hit, Traversal};
 use crate::bsdf::Bsdf;
 use crate::light::{emitted, Lights};
 use crate::ray::Ray;
-use crate::rng::Rng;
+use crate::sampler::Sampler;
 use crate::sampling::Frame;
 use crate::scene::{Interaction, Scene};
 use glam::Vec3;
@@ -117,9 +117,9 @@ impl PathTracer<'_> {
 
     /// Direct light reflected at `v` towards the previous vertex: the
     /// wavefront's terms (`direct_terms`), their rays traced one by one.
-    fn direct(&self, v: &Vertex, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+    fn direct(&self, v: &Vertex, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
         let (mut terms, mut shadow, mut closest) = (Vec::new(), Vec::new(), Vec::new());
-        self.direct_terms(v, rng, &mut terms, &mut shadow, &mut closest);
+        self.direct_terms(v, sampler, &mut terms, &mut shadow, &mut closest);
         *rays += (shadow.len() + closest.len()) as u64;
         let occluded: Vec<bool> = shadow.iter().map(|r| self.accel.occluded(r)).collect();
         let found: Vec<Option<Hit>> = closest.iter().map(|r| self.accel.intersect(r)).collect();
@@ -132,11 +132,11 @@ impl Integrator for PathTracer<'_> {
         self.accel
     }
 
-    fn radiance_batch(&self, rays: &[Ray], hits: &[Option<Hit>], rngs: &mut [&mut Rng], out: &mut [Vec3], ray_count: &mut u64) {
-        self.wavefront(rays, hits, rngs, out, ray_count)
+    fn radiance_batch(&self, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
+        self.wavefront(rays, hits, samplers, out, ray_count)
     }
 
-    fn radiance_from(&self, camera_ray: &Ray, hit: Option<Hit>, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+    fn radiance_from(&self, camera_ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
         let m = self.max_depth;
         let counts = |bounce: u32| self.accumulate || bounce == m;
         let wo = -camera_ray.dir.normalize();
@@ -153,12 +153,13 @@ impl Integrator for PathTracer<'_> {
         let mut bounce = 1;
         loop {
             let count = counts(bounce);
+            sampler.set_bounce(bounce);
             if count {
-                l += beta * self.direct(&v, rng, rays);
+                l += beta * self.direct(&v, sampler, rays);
             }
             // With MIS the last vertex still needs its BSDF sample: the light
             // it finds is part of this bounce's direct light.
-            let Some(c) = self.continuation(&v, bounce, count, beta, radiance_scale, rng) else { break };
+            let Some(c) = self.continuation(&v, bounce, count, beta, radiance_scale, sampler) else { break };
             let last = bounce == m;
             let ray = v.it.spawn_ray(c.wi);
             let gather = count && (!self.hemisphere || c.delta);

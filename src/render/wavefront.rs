@@ -15,7 +15,7 @@ use super::path::{Continuation, PathTracer, Vertex};
 use crate::accel::Hit;
 use crate::light::{emitted, Target};
 use crate::ray::Ray;
-use crate::rng::Rng;
+use crate::sampler::{dim, Sampler};
 use crate::sampling::{uniform_hemisphere, UNIFORM_HEMISPHERE_PDF};
 use crate::scene::Interaction;
 use glam::Vec3;
@@ -51,8 +51,8 @@ struct Path {
 
 impl PathTracer<'_> {
     /// `out[i]` = the radiance along camera ray `rays[i]`, whose closest hit
-    /// is `hits[i]`, drawing from `rngs[i]`.
-    pub(super) fn wavefront(&self, rays: &[Ray], hits: &[Option<Hit>], rngs: &mut [&mut Rng], out: &mut [Vec3], ray_count: &mut u64) {
+    /// is `hits[i]`, drawing from `samplers[i]`.
+    pub(super) fn wavefront(&self, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
         let m = self.max_depth;
         let counts = |bounce: u32| self.accumulate || bounce == m;
         let mut paths: Vec<Path> = rays
@@ -91,14 +91,15 @@ impl PathTracer<'_> {
             for (i, p) in paths.iter_mut().enumerate() {
                 let Some(v) = &p.v else { continue };
                 live = true;
-                let rng = &mut *rngs[i];
+                let sampler = &mut *samplers[i];
+                sampler.set_bounce(p.bounce);
                 let first = terms.len();
                 p.counted = counts(p.bounce);
                 if p.counted {
-                    self.direct_terms(v, rng, &mut terms, &mut shadow, &mut closest);
+                    self.direct_terms(v, sampler, &mut terms, &mut shadow, &mut closest);
                 }
                 p.terms = first..terms.len();
-                p.next = self.continuation(v, p.bounce, p.counted, p.beta, p.radiance_scale, rng).map(|c| {
+                p.next = self.continuation(v, p.bounce, p.counted, p.beta, p.radiance_scale, sampler).map(|c| {
                     closest.push(v.it.spawn_ray(c.wi));
                     (closest.len() - 1, c)
                 });
@@ -155,16 +156,18 @@ impl PathTracer<'_> {
     /// lights no ray can hit have weight 1: only light sampling finds them);
     /// `-H` adds CS184's uniform hemisphere samples for the lights a ray
     /// can hit.
-    pub(super) fn direct_terms(&self, v: &Vertex, rng: &mut Rng, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) {
+    pub(super) fn direct_terms(&self, v: &Vertex, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) {
         // Delta BSDFs see lights only through their sampled ray.
         let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return };
-        let explicit = self.lights.lights.iter().filter(|l| !self.hemisphere || !l.is_visible());
-        for light in explicit {
+        let explicit = self.lights.lights.iter().enumerate().filter(|(_, l)| !self.hemisphere || !l.is_visible());
+        for (li, light) in explicit {
             let n = if light.is_delta() { 1 } else { self.light_samples };
             let mis = !self.hemisphere && light.is_visible();
-            for _ in 0..n {
-                let u = rng.uniform2();
-                let u_sel = rng.uniform();
+            for j in 0..n {
+                // Light li's sample j: its own slots, whatever other lights drew.
+                let k = li as u64 * self.light_samples as u64 + j as u64;
+                let u = sampler.slot_2d(dim::LIGHT, k);
+                let u_sel = if light.uses_selection() { sampler.slot_1d(dim::LIGHT_CHOICE, k) } else { 0.0 };
                 let Some(s) = light.sample(self.scene, v.it.p, u, u_sel) else { continue };
                 let cos = s.wi.dot(v.ns);
                 if cos <= 0.0 || s.wi.dot(v.ng) <= 0.0 || s.pdf <= 0.0 {
@@ -189,8 +192,8 @@ impl PathTracer<'_> {
         }
         let visible = self.lights.lights.iter().filter(|l| l.is_visible()).count() as u32;
         let n = visible.max(1) * self.light_samples;
-        for _ in 0..n {
-            let (u1, u2) = rng.uniform2();
+        for j in 0..n {
+            let (u1, u2) = sampler.slot_2d(dim::HEMISPHERE, j as u64);
             let local = uniform_hemisphere(u1, u2);
             let wi = v.frame.to_world(local);
             if wi.dot(v.ng) <= 0.0 {
@@ -239,13 +242,17 @@ impl PathTracer<'_> {
     /// (its share of the direct light) or behind a delta BSDF (the only way
     /// to see light there), and only when its bounce counts.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, radiance_scale: f32, rng: &mut Rng) -> Option<Continuation> {
+    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, radiance_scale: f32, sampler: &mut Sampler) -> Option<Continuation> {
         let last = bounce == self.max_depth;
         let bsdf = v.bsdf?;
         if last && (!count || (self.hemisphere && !bsdf.is_delta())) {
             return None;
         }
-        let s = bsdf.sample(v.wo, rng)?;
+        // Only the draws this BSDF uses (each has its own slot anyway).
+        let (lobe, dir) = bsdf.draws();
+        let lobe = if lobe { sampler.slot_1d(dim::BSDF_LOBE, 0) } else { 0.0 };
+        let u = if dir { sampler.slot_2d(dim::BSDF, 0) } else { (0.0, 0.0) };
+        let s = bsdf.sample_with(v.wo, lobe, u)?;
         let wi = v.frame.to_world(s.wi);
         // With shading normals a sampled direction can leave on the other
         // side of the face than its lobe says. A reflecting surface then
@@ -264,7 +271,7 @@ impl PathTracer<'_> {
             // Judged on the throughput without the η² scaling of radiance
             // inside a dielectric (which leaving it undoes).
             let q = (beta_next.max_element() / radiance_scale).min(1.0);
-            if q <= 0.0 || rng.uniform() >= q {
+            if q <= 0.0 || sampler.slot_1d(dim::RUSSIAN_ROULETTE, 0) >= q {
                 return None;
             }
             beta_next /= q;

@@ -63,10 +63,12 @@ pub fn owen(v: u32, seed: u32) -> u32 {
     x.reverse_bits()
 }
 
-/// A 32-bit hash of (pixel seed, dimension id, which scramble).
+/// Three 32-bit scramble seeds (index, x, y) of (pixel seed, dimension id),
+/// from one 64-bit hash.
 #[inline]
-fn seed_of(pixel_seed: u64, dim: u32, which: u32) -> u32 {
-    (crate::rng::mix64(pixel_seed ^ ((dim as u64) << 8 | which as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)) >> 32) as u32
+fn seeds_of(pixel_seed: u64, dim: u64) -> [u32; 3] {
+    let h = crate::rng::mix64(pixel_seed ^ dim.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    [h as u32, (h >> 32) as u32, (h.wrapping_mul(0xD6E8_FEB8_6659_FD93) >> 32) as u32]
 }
 
 /// A 32-bit fraction as a float in [0, 1): its top 24 bits, so 1 is never returned.
@@ -75,20 +77,32 @@ pub fn to_unit(bits: u32) -> f32 {
     (bits >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
-/// Draw `index` of the 2D sequence of dimension `dim` of a pixel.
+/// The sample index, nested-scrambled within its `bits` low bits (all
+/// indices of a render are below 2^bits): the shuffled index stays below
+/// 2^bits, so `sobol2` loops over `bits` bits, not 32 (Cycles 3.5 caps the
+/// index the same way), and aligned blocks still map to aligned blocks.
 #[inline]
-pub fn sample_2d(pixel_seed: u64, dim: u32, index: u32) -> (f32, f32) {
-    let j = owen(index, seed_of(pixel_seed, dim, 0));
-    let (x, y) = sobol2(j);
-    (to_unit(owen(x, seed_of(pixel_seed, dim, 1))), to_unit(owen(y, seed_of(pixel_seed, dim, 2))))
+fn shuffled(index: u32, bits: u32, seed: u32) -> u32 {
+    if bits == 0 {
+        return 0;
+    }
+    owen(index << (32 - bits), seed) >> (32 - bits)
+}
+
+/// Draw `index` (< 2^`bits`) of the 2D sequence of dimension `dim` of a pixel.
+#[inline]
+pub fn sample_2d(pixel_seed: u64, dim: u64, index: u32, bits: u32) -> (f32, f32) {
+    let s = seeds_of(pixel_seed, dim);
+    let (x, y) = sobol2(shuffled(index, bits, s[0]));
+    (to_unit(owen(x, s[1])), to_unit(owen(y, s[2])))
 }
 
 /// Draw `index` of the 1D sequence of dimension `dim` of a pixel (Sobol
 /// dimension 0: a scrambled van der Corput sequence).
 #[inline]
-pub fn sample_1d(pixel_seed: u64, dim: u32, index: u32) -> f32 {
-    let j = owen(index, seed_of(pixel_seed, dim, 0));
-    to_unit(owen(j.reverse_bits(), seed_of(pixel_seed, dim, 1)))
+pub fn sample_1d(pixel_seed: u64, dim: u64, index: u32, bits: u32) -> f32 {
+    let s = seeds_of(pixel_seed, dim);
+    to_unit(owen(shuffled(index, bits, s[0]).reverse_bits(), s[1]))
 }
 
 #[cfg(test)]
@@ -138,15 +152,15 @@ mod tests {
     fn every_aligned_block_is_a_net() {
         for pixel in 0..64u64 {
             let seed = crate::rng::mix64(pixel);
-            for dim in [0u32, 1, 17, 1000] {
-                let pts: Vec<(f32, f32)> = (0..1024).map(|i| sample_2d(seed, dim, i)).collect();
+            for dim in [0u64, 1, 17, 1000, 1 << 48] {
+                let pts: Vec<(f32, f32)> = (0..1024).map(|i| sample_2d(seed, dim, i, 10)).collect();
                 for m in 1..=8u32 {
                     for block in pts.chunks(1 << m).take(4) {
                         assert!(is_net(block, m), "pixel {pixel} dim {dim} m {m}");
                     }
                 }
                 // 1D: every aligned block of 2^m is stratified in 2^m intervals.
-                let xs: Vec<f32> = (0..256).map(|i| sample_1d(seed, dim, i)).collect();
+                let xs: Vec<f32> = (0..256).map(|i| sample_1d(seed, dim, i, 8 + (pixel % 3) as u32)).collect();
                 for m in 1..=8u32 {
                     for block in xs.chunks(1 << m) {
                         let mut seen = vec![false; 1 << m];
