@@ -17,6 +17,10 @@
 //! * Lights of zero radiance (the `_unlit` scenes' sky) are dropped.
 
 pub mod environment;
+pub mod lune;
+pub mod spherical_rect;
+
+use spherical_rect::RectEmitter;
 
 pub use environment::EnvMap;
 
@@ -35,8 +39,9 @@ pub enum Light {
     Hemisphere { radiance: Vec3 },
     /// A one-sided rectangle `corner + s*ex + t*ey`, s,t in [0,1], emitting towards `normal`.
     Rect { corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3, radiance: Vec3 },
-    /// The triangles of an emissive mesh, sampled by area.
-    Mesh { geom_id: u32, cdf: Vec<f32>, area: f32, radiance: Vec3 },
+    /// The triangles of an emissive mesh, sampled by area; or, when they
+    /// form one rectangle (`rect`), by solid angle where it subtends enough.
+    Mesh { geom_id: u32, cdf: Vec<f32>, area: f32, radiance: Vec3, rect: Option<RectEmitter> },
     Sphere { center: Vec3, radius: f32, radiance: Vec3 },
     /// A latitude-longitude environment map (`-e`).
     Environment(Arc<EnvMap>),
@@ -79,7 +84,10 @@ impl Light {
             Light::Directional { to_light, irradiance } => format!("directional towards {to_light} irradiance {irradiance}"),
             Light::Hemisphere { radiance } => format!("hemisphere (+y) radiance {radiance}"),
             Light::Rect { corner, ex, ey, radiance, .. } => format!("rectangle at {corner} {}x{} radiance {radiance}", ex.length(), ey.length()),
-            Light::Mesh { geom_id, area, radiance, .. } => format!("emissive mesh {geom_id} area {area} radiance {radiance}"),
+            Light::Mesh { geom_id, area, radiance, rect, .. } => format!(
+                "emissive mesh {geom_id} area {area} radiance {radiance}{}",
+                if rect.is_some() { " (a rectangle: sampled by solid angle)" } else { "" }
+            ),
             Light::Sphere { center, radius, radiance } => format!("emissive sphere at {center} r {radius} radiance {radiance}"),
             Light::Environment(e) => format!("environment map {} ({}x{})", e.path, e.width, e.height),
         }
@@ -88,6 +96,12 @@ impl Light {
     /// Solid-angle pdf with which `sample` from `p` picks the point `x` (normal
     /// `n`) of this emitter's surface; 0 for lights that are not surfaces.
     pub fn pdf_hit(&self, p: Vec3, x: Vec3, n: Vec3) -> f32 {
+        // The same choice `sample` makes from `p`.
+        if let Light::Mesh { rect: Some(r), .. } = self {
+            if let Some(sr) = r.from(p) {
+                return 1.0 / sr.omega;
+            }
+        }
         let pdf_area = match self {
             Light::Mesh { area, .. } => 1.0 / area,
             Light::Sphere { radius, .. } => 1.0 / (4.0 * PI * radius * radius),
@@ -157,11 +171,17 @@ impl Light {
                 Some(LightSample { wi, value: *radiance, pdf: UNIFORM_HEMISPHERE_PDF, target: Target::Infinite })
             }
             Light::Rect { corner, ex, ey, normal, radiance } => {
+                if let Some(sr) = RectEmitter::new(*corner, *ex, *ey, *normal).and_then(|r| r.from(p)) {
+                    return solid_angle_sample(p, sr.sample(u), *normal, magnitude(&[*corner, *corner + *ex + *ey]), *radiance, 1.0 / sr.omega);
+                }
                 let area = ex.cross(*ey).length();
                 let q = *corner + *ex * u.0 + *ey * u.1;
                 area_sample(p, q, *normal, magnitude(&[*corner, *corner + *ex + *ey, *corner + *ex, *corner + *ey]), *radiance, 1.0 / area)
             }
-            Light::Mesh { geom_id, cdf, area, radiance } => {
+            Light::Mesh { geom_id, cdf, area, radiance, rect } => {
+                if let Some((r, sr)) = rect.and_then(|r| r.from(p).map(|sr| (r, sr))) {
+                    return solid_angle_sample(p, sr.sample(u), r.normal, magnitude(&[r.corner, r.corner + r.ex + r.ey]), *radiance, 1.0 / sr.omega);
+                }
                 let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { return None };
                 let i = cdf.partition_point(|&c| c <= u_sel * area).min(cdf.len() - 1);
                 let [a, b, c] = m.triangles[i].map(|k| m.positions[k as usize]);
@@ -181,6 +201,16 @@ impl Light {
             }
         }
     }
+}
+
+/// A sample at `q` drawn uniformly in solid angle (pdf `pdf`), of a
+/// one-sided emitter with normal `n` that `p` is in front of.
+fn solid_angle_sample(p: Vec3, q: Vec3, n: Vec3, mag: f32, radiance: Vec3, pdf: f32) -> Option<LightSample> {
+    let wi = (q - p).normalize_or_zero();
+    if !(-n.dot(wi) > 0.0) || !(pdf > 0.0 && pdf.is_finite()) {
+        return None;
+    }
+    Some(LightSample { wi, value: radiance, pdf, target: Target::Point(offset_ray_origin(q, n, mag)) })
 }
 
 /// Convert an area-measure sample at `q` (normal `n`, one-sided) into a
@@ -245,7 +275,9 @@ impl Lights {
                     }
                     if acc > 0.0 {
                         out.of_geometry[g] = Some(out.lights.len());
-                        out.lights.push(Light::Mesh { geom_id: g as u32, cdf, area: acc, radiance });
+                        let tris: Vec<[Vec3; 3]> = m.triangles.iter().map(|t| t.map(|k| m.positions[k as usize])).collect();
+                        let rect = RectEmitter::of_triangles(&tris);
+                        out.lights.push(Light::Mesh { geom_id: g as u32, cdf, area: acc, radiance, rect });
                     }
                 }
                 Shape::Sphere { center, radius } => {

@@ -97,6 +97,12 @@ impl PathTracer<'_> {
         }
     }
 
+    /// Whether the hemisphere light is sampled by the lune (`light::lune`) at
+    /// a vertex with this BSDF: diffuse, and not CS184's `-H` estimator.
+    pub(super) fn sky_by_lune(&self, bsdf: &Bsdf) -> bool {
+        !self.hemisphere && matches!(bsdf, Bsdf::Diffuse(_))
+    }
+
     /// What a BSDF sample that escaped along `c.wi` sees: each escaping
     /// light's radiance (hemisphere, environment) weighted against that
     /// light's own samples, since each light is sampled on its own.
@@ -106,7 +112,9 @@ impl PathTracer<'_> {
             .iter()
             .map(|l| {
                 let le = l.escaped(c.wi);
-                if le == Vec3::ZERO || c.delta {
+                if c.sky_by_lune && matches!(l, crate::light::Light::Hemisphere { .. }) {
+                    Vec3::ZERO
+                } else if le == Vec3::ZERO || c.delta {
                     le
                 } else {
                     le * power_heuristic(c.pdf, self.light_samples as f32 * l.pdf_escape(c.wi))
@@ -198,6 +206,9 @@ pub(super) struct Continuation {
     pub beta: Vec3,
     /// Sampled from a delta lobe.
     pub delta: bool,
+    /// The vertex sampled the hemisphere light with the lune sampler
+    /// (`sky_by_lune`), so this ray's view of it must add nothing.
+    pub sky_by_lune: bool,
     /// The product of the path's radiance scalings (η²) so far, which
     /// Russian roulette divides out of `beta`.
     pub radiance_scale: f32,

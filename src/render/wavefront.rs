@@ -13,7 +13,7 @@
 
 use super::path::{Continuation, PathTracer, Vertex};
 use crate::accel::Hit;
-use crate::light::{emitted, Target};
+use crate::light::{emitted, lune, Light, LightSample, Target};
 use crate::ray::Ray;
 use crate::sampler::{dim, Sampler};
 use crate::sampling::{uniform_hemisphere, UNIFORM_HEMISPHERE_PDF};
@@ -168,7 +168,16 @@ impl PathTracer<'_> {
                 let k = li as u64 * self.light_samples as u64 + j as u64;
                 let u = sampler.slot_2d(dim::LIGHT, k);
                 let u_sel = if light.uses_selection() { sampler.slot_1d(dim::LIGHT_CHOICE, k) } else { 0.0 };
-                let Some(s) = light.sample(self.scene, v.it.p, u, u_sel) else { continue };
+                // The sky at a diffuse vertex: the lune sampler alone (its
+                // weight is constant; BSDF rays escaping there add nothing).
+                let lune = self.sky_by_lune(&bsdf) && matches!(light, Light::Hemisphere { .. });
+                let s = if lune {
+                    let Light::Hemisphere { radiance } = light else { unreachable!() };
+                    lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite })
+                } else {
+                    light.sample(self.scene, v.it.p, u, u_sel)
+                };
+                let Some(s) = s else { continue };
                 let cos = s.wi.dot(v.ns);
                 if cos <= 0.0 || s.wi.dot(v.ng) <= 0.0 || s.pdf <= 0.0 {
                     continue;
@@ -182,7 +191,7 @@ impl PathTracer<'_> {
                     Target::Point(q) => v.it.spawn_ray_to(q),
                     Target::Infinite => v.it.spawn_ray(s.wi),
                 });
-                let w = if mis { super::path::power_heuristic(n as f32 * s.pdf, bsdf.pdf(v.wo, wi)) } else { 1.0 };
+                let w = if mis && !lune { super::path::power_heuristic(n as f32 * s.pdf, bsdf.pdf(v.wo, wi)) } else { 1.0 };
                 terms.push(Term::Shadow { ray: shadow.len() - 1, value: f * s.value * cos / s.pdf * w });
             }
             terms.push(Term::Group { n });
@@ -276,6 +285,6 @@ impl PathTracer<'_> {
             }
             beta_next /= q;
         }
-        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale })
+        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale, sky_by_lune: self.sky_by_lune(&bsdf) })
     }
 }
