@@ -168,6 +168,38 @@ fn area_light_pdf_is_a_density_over_solid_angle() {
     }
 }
 
+#[test]
+fn sphere_lights_sampled_by_their_cone_give_the_closed_form_irradiance() {
+    // A sphere of radiance L, radius r, centre at distance d straight above a
+    // point whose normal faces it: irradiance E = π L r²/d² exactly. The
+    // cone sampler's estimate L cos/pdf must give it within its standard
+    // error, and `pdf_hit` must return the sample's pdf (MIS).
+    let (r, le) = (0.5f32, 3.0f32);
+    for d in [0.8f32, 2.0, 30.0] {
+        let center = Vec3::new(0.2, d, -0.1);
+        let scene = scene_of(vec![(Shape::Sphere { center, radius: r }, diffuse("lamp", 0.0, le))], vec![]);
+        let lights = Lights::from_scene(&scene).unwrap();
+        let light = &lights.lights[0];
+        let p = Vec3::new(0.2, 0.0, -0.1);
+        let mut rng = Rng::new(17, 2);
+        let n = 200_000;
+        let (mut s1, mut s2) = (0.0f64, 0.0f64);
+        for _ in 0..n {
+            let s = light.sample(&scene, p, rng.uniform2(), rng.uniform()).expect("the sphere is in view");
+            let pathtracer::light::Target::Point(q) = s.target else { panic!("not a point") };
+            let ph = light.pdf_hit(p, q, (q - center).normalize());
+            assert!((ph - s.pdf).abs() <= 1e-3 * s.pdf, "d {d}: pdf_hit {ph} vs {}", s.pdf);
+            let x = (s.value.x * s.wi.y.max(0.0) / s.pdf) as f64;
+            s1 += x;
+            s2 += x * x;
+        }
+        let mean = s1 / n as f64;
+        let se = ((s2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt();
+        let exact = std::f64::consts::PI * le as f64 * (r * r) as f64 / (d * d) as f64;
+        assert!((mean - exact).abs() <= 4.0 * se + 1e-5 * exact, "d {d}: E = {mean} ± {se}, exact {exact}");
+    }
+}
+
 // ---------------------------------------------------------------- scenes in code
 
 struct Stats {

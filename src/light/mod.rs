@@ -15,9 +15,15 @@
 //! * The environment light (`-e FILE.exr`, see `environment`): radiance from
 //!   every direction, seen by escaping rays, importance sampled.
 //! * Lights of zero radiance (the `_unlit` scenes' sky) are dropped.
+//! * Sampling (CS184 samples every emitter by area): rectangles — area
+//!   lights and two-triangle rectangular meshes — by solid angle
+//!   (`spherical_rect`), spheres seen from outside by their cone
+//!   (`sphere_cone`), the hemisphere light at diffuse vertices by the lune
+//!   (`lune`); other meshes by area. `pdf_hit` applies the same choice.
 
 pub mod environment;
 pub mod lune;
+pub mod sphere_cone;
 pub mod spherical_rect;
 
 use spherical_rect::RectEmitter;
@@ -100,6 +106,11 @@ impl Light {
         if let Light::Mesh { rect: Some(r), .. } = self {
             if let Some(sr) = r.from(p) {
                 return 1.0 / sr.omega;
+            }
+        }
+        if let Light::Sphere { center, radius, .. } = self {
+            if let Some(cone) = sphere_cone::SphereCone::new(p, *center, *radius) {
+                return cone.pdf();
             }
         }
         let pdf_area = match self {
@@ -191,6 +202,12 @@ impl Light {
                 area_sample(p, q, n, magnitude(&[a, b, c]), *radiance, 1.0 / area)
             }
             Light::Sphere { center, radius, radiance } => {
+                let mag = center.abs().max_element() + radius;
+                if let Some(cone) = sphere_cone::SphereCone::new(p, *center, *radius) {
+                    let (_, q) = cone.sample(u);
+                    let n = (q - *center).normalize_or_zero();
+                    return solid_angle_sample(p, q, n, mag, *radiance, cone.pdf());
+                }
                 let n = uniform_sphere(u.0, u.1);
                 let q = *center + n * *radius;
                 area_sample(p, q, n, center.abs().max_element() + radius, *radiance, 1.0 / (4.0 * PI * radius * radius))
