@@ -1,7 +1,9 @@
-//! Deterministic random numbers: one independent PCG32 stream per pixel sample.
+//! Deterministic random numbers: PCG32 streams for tests, benchmarks and
+//! tabulation (renders draw through `sampler`), and `mix64`, the hash the
+//! samplers are built on.
 //!
-//! The stream is chosen by hashing (seed, pixel, sample index), so an image depends only on
-//! `--seed`, never on the thread count or the order tiles are rendered in.
+//! `for_sample` picks a stream by hashing (seed, pixel, sample index): what
+//! depends on it depends only on the seed, never on threads or tile order.
 
 /// PCG32 (O'Neill, XSH-RR 64/32).
 #[derive(Clone, Debug)]
