@@ -403,38 +403,20 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         let path = a.partial.as_deref().expect("clap requires --partial with --part");
         crate::partial::write(path, &header, &out.sums)?;
         println!(
-            "{} | part {}/{} ({} split) | backend {} | BVH build {:.3} s | render {:.3} s | {} rays | {:.2} Mrays/s | {} threads | wrote {}",
+            "{} | part {}/{} ({} split) | {} | {} threads | wrote {}",
             scene.name,
             p.index,
             p.count,
             p.kind.name(),
-            built.accel.describe(),
-            built.build_seconds,
-            render_s,
-            out.rays,
-            out.rays as f64 / render_s.max(1e-9) / 1e6,
+            timings(&built, render_s, out.rays),
             threads,
             path.display()
         );
         return Ok(());
     }
 
-    image_io::write_png(&output, &out.image)?;
-    let mut written = vec![output.display().to_string()];
-    if a.output.is_some() {
-        // CS184 writes the rate image beside every -f output.
-        let rate = rate_path(&output);
-        image_io::write_rate_png(&rate, out.image.width, out.image.height, &out.samples, spp)?;
-        written.push(rate.display().to_string());
-    }
-    if let Some(p) = &a.exr {
-        image_io::write_exr(p, &out.image)?;
-        written.push(p.display().to_string());
-    }
-    if let Some(p) = &a.variance_exr {
-        image_io::write_exr(p, &out.variance)?;
-        written.push(p.display().to_string());
-    }
+    // CS184 writes the rate image beside every -f output.
+    let written = write_images(&out, &output, a.output.is_some(), a.exr.as_deref(), a.variance_exr.as_deref(), spp)?;
     // With -a, how many samples the pixels kept (their mean per pixel): what adaptive
     // sampling saved against -s.
     let kept = match adaptive {
@@ -445,18 +427,52 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         None => String::new(),
     };
     println!(
-        "{} | {} primitives | backend {} | BVH build {:.3} s | render {:.3} s | {} rays | {:.2} Mrays/s{kept} | {} threads | wrote {}",
+        "{} | {} primitives | {}{kept} | {} threads | wrote {}",
         scene.name,
         scene.primitive_count(),
-        built.accel.describe(),
-        built.build_seconds,
-        render_s,
-        out.rays,
-        out.rays as f64 / render_s.max(1e-9) / 1e6,
+        timings(&built, render_s, out.rays),
         threads,
         written.join(", ")
     );
     Ok(())
+}
+
+/// The summary line's backend, build, render and ray-throughput fields.
+fn timings(built: &accel::Built, render_s: f64, rays: u64) -> String {
+    format!(
+        "backend {} | BVH build {:.3} s | render {:.3} s | {rays} rays | {:.2} Mrays/s",
+        built.accel.describe(),
+        built.build_seconds,
+        render_s,
+        rays as f64 / render_s.max(1e-9) / 1e6
+    )
+}
+
+/// A render's image files: the PNG, with `rate` its `_rate.png` beside it,
+/// and the EXRs asked for; returns the paths written. `merge` writes through
+/// this too, so a merged split render writes what the render would have.
+pub(crate) fn write_images(
+    out: &render::RenderOutput,
+    png: &Path,
+    rate: bool,
+    exr: Option<&Path>,
+    variance_exr: Option<&Path>,
+    spp: u32,
+) -> Result<Vec<String>> {
+    image_io::write_png(png, &out.image)?;
+    let mut written = vec![png.display().to_string()];
+    if rate {
+        let rate = rate_path(png);
+        image_io::write_rate_png(&rate, out.image.width, out.image.height, &out.samples, spp)?;
+        written.push(rate.display().to_string());
+    }
+    for (path, img) in [(exr, &out.image), (variance_exr, &out.variance)] {
+        if let Some(p) = path {
+            image_io::write_exr(p, img)?;
+            written.push(p.display().to_string());
+        }
+    }
+    Ok(written)
 }
 
 /// A checked `--part I/N`.

@@ -7,7 +7,6 @@
 //! render's, byte for byte, whatever the number of parts.
 
 use crate::error::{Error, Result};
-use crate::image_io;
 use crate::partial::{Header, Partial, SplitKind};
 use crate::render::sums::PixelSums;
 use crate::render::{tile_grid, RenderOutput, Share};
@@ -157,18 +156,8 @@ pub fn run(paths: &[PathBuf], png: &Path, exr: Option<&Path>, variance_exr: Opti
     let m = merge(paths)?;
     let spp = m.header.spp()?;
     let out = &m.output;
-    image_io::write_png(png, &out.image)?;
-    let rate = crate::cli::rate_path(png);
-    image_io::write_rate_png(&rate, out.image.width, out.image.height, &out.samples, spp)?;
-    let mut written = vec![png.display().to_string(), rate.display().to_string()];
-    if let Some(p) = exr {
-        image_io::write_exr(p, &out.image)?;
-        written.push(p.display().to_string());
-    }
-    if let Some(p) = variance_exr {
-        image_io::write_exr(p, &out.variance)?;
-        written.push(p.display().to_string());
-    }
+    // -f is required here, so the rate image is always written (as the render does with -f).
+    let written = crate::cli::write_images(out, png, true, exr, variance_exr, spp)?;
     let samples: u64 = out.samples.iter().map(|&n| n as u64).sum();
     if m.bad_samples > 0 {
         println!("warning: {} samples had a NaN or out-of-range value (counted as 0 or ±2^36)", m.bad_samples);

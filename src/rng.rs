@@ -1,9 +1,6 @@
 //! Deterministic random numbers: PCG32 streams for tests, benchmarks and
 //! tabulation (renders draw through `sampler`), and `mix64`, the hash the
 //! samplers are built on.
-//!
-//! `for_sample` picks a stream by hashing (seed, pixel, sample index): what
-//! depends on it depends only on the seed, never on threads or tile order.
 
 /// PCG32 (O'Neill, XSH-RR 64/32).
 #[derive(Clone, Debug)]
@@ -29,14 +26,6 @@ impl Rng {
         r.state = r.state.wrapping_add(mix64(seed));
         r.next_u32();
         r
-    }
-
-    /// The stream of sample `index` of one pixel: every sample starts a
-    /// stream of its own, so any range of a pixel's samples can be drawn
-    /// without the ones before it (split renders), and a sample's draws
-    /// never depend on how many its predecessors took.
-    pub fn for_sample(seed: u64, x: u32, y: u32, index: u32) -> Self {
-        Rng::new(seed ^ mix64(index as u64 ^ 0x5A3D_0E1F_0000_0000), ((y as u64) << 32) | x as u64)
     }
 
     #[inline]
@@ -66,13 +55,13 @@ mod tests {
 
     #[test]
     fn streams_differ_and_repeat() {
-        let a: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 0); move |_| r.next_u32() }).collect();
-        let b: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 0); move |_| r.next_u32() }).collect();
-        let c: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 3, 2, 0); move |_| r.next_u32() }).collect();
+        let a: Vec<u32> = (0..4).map({ let mut r = Rng::new(1, 23); move |_| r.next_u32() }).collect();
+        let b: Vec<u32> = (0..4).map({ let mut r = Rng::new(1, 23); move |_| r.next_u32() }).collect();
+        let c: Vec<u32> = (0..4).map({ let mut r = Rng::new(1, 32); move |_| r.next_u32() }).collect();
         assert_eq!(a, b);
         assert_ne!(a, c);
-        let d: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(1, 2, 3, 1); move |_| r.next_u32() }).collect();
-        let e: Vec<u32> = (0..4).map({ let mut r = Rng::for_sample(2, 2, 3, 0); move |_| r.next_u32() }).collect();
+        let d: Vec<u32> = (0..4).map({ let mut r = Rng::new(2, 23); move |_| r.next_u32() }).collect();
+        let e: Vec<u32> = (0..4).map({ let mut r = Rng::new(1, 24); move |_| r.next_u32() }).collect();
         assert_ne!(d, a);
         assert_ne!(e, a);
     }

@@ -210,7 +210,7 @@ impl Light {
                 }
                 let n = uniform_sphere(u.0, u.1);
                 let q = *center + n * *radius;
-                area_sample(p, q, n, center.abs().max_element() + radius, *radiance, 1.0 / (4.0 * PI * radius * radius))
+                area_sample(p, q, n, mag, *radiance, 1.0 / (4.0 * PI * radius * radius))
             }
             Light::Environment(e) => {
                 let (wi, value, pdf) = e.sample(u)?;

@@ -349,15 +349,10 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
         })
         .collect();
     bar.finish_and_clear();
-    let mut out = RenderOutput {
-        image: Rgb::new(region.w, region.h),
-        variance: Rgb::new(region.w, region.h),
-        samples: vec![0u32; (region.w * region.h) as usize],
-        sums: if settings.keep_sums { vec![PixelSums::default(); (region.w * region.h) as usize] } else { Vec::new() },
-        bad_samples: 0,
-        rays: 0,
-        seconds: 0.0,
-    };
+    let mut out = RenderOutput::blank(region.w, region.h);
+    if settings.keep_sums {
+        out.sums = vec![PixelSums::default(); (region.w * region.h) as usize];
+    }
     for (local, sums, bad, tile_rays) in done {
         for ((lx, ly), p) in local.into_iter().zip(sums) {
             let i = (ly * region.w + lx) as usize;
@@ -377,7 +372,17 @@ impl RenderOutput {
     /// The images of a render from every pixel's sums (`merge` makes its
     /// output with this, so it writes exactly what the render would have).
     pub fn from_sums(width: u32, height: u32, sums: Vec<PixelSums>) -> RenderOutput {
-        let mut out = RenderOutput {
+        let mut out = RenderOutput::blank(width, height);
+        for (i, p) in sums.iter().enumerate() {
+            out.set_pixel(i, p);
+        }
+        out.sums = sums;
+        out
+    }
+
+    /// Black images, no samples, no sums.
+    fn blank(width: u32, height: u32) -> RenderOutput {
+        RenderOutput {
             image: Rgb::new(width, height),
             variance: Rgb::new(width, height),
             samples: vec![0u32; (width * height) as usize],
@@ -385,12 +390,7 @@ impl RenderOutput {
             bad_samples: 0,
             rays: 0,
             seconds: 0.0,
-        };
-        for (i, p) in sums.iter().enumerate() {
-            out.set_pixel(i, p);
         }
-        out.sums = sums;
-        out
     }
 
     fn set_pixel(&mut self, i: usize, p: &PixelSums) {

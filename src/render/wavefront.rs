@@ -160,6 +160,7 @@ impl PathTracer<'_> {
         // Delta BSDFs see lights only through their sampled ray.
         let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return };
         let explicit = self.lights.lights.iter().enumerate().filter(|(_, l)| !self.hemisphere || !l.is_visible());
+        let sky_by_lune = self.sky_by_lune(&bsdf);
         for (li, light) in explicit {
             let n = if light.is_delta() { 1 } else { self.light_samples };
             let mis = !self.hemisphere && light.is_visible();
@@ -170,12 +171,12 @@ impl PathTracer<'_> {
                 let u_sel = if light.uses_selection() { sampler.slot_1d(dim::LIGHT_CHOICE, k) } else { 0.0 };
                 // The sky at a diffuse vertex: the lune sampler alone (its
                 // weight is constant; BSDF rays escaping there add nothing).
-                let lune = self.sky_by_lune(&bsdf) && matches!(light, Light::Hemisphere { .. });
-                let s = if lune {
-                    let Light::Hemisphere { radiance } = light else { unreachable!() };
-                    lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite })
-                } else {
-                    light.sample(self.scene, v.it.p, u, u_sel)
+                let lune = sky_by_lune && matches!(light, Light::Hemisphere { .. });
+                let s = match light {
+                    Light::Hemisphere { radiance } if lune => {
+                        lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite })
+                    }
+                    _ => light.sample(self.scene, v.it.p, u, u_sel),
                 };
                 let Some(s) = s else { continue };
                 let cos = s.wi.dot(v.ns);
