@@ -77,7 +77,8 @@ pub fn find_scene(name: &str) -> Result<PathBuf> {
     if p.exists() {
         return Ok(p.to_path_buf());
     }
-    let file = if name.ends_with(".dae") { name.to_string() } else { format!("{name}.dae") };
+    let has_ext = [".dae", ".obj", ".ply"].iter().any(|e| name.to_ascii_lowercase().ends_with(e));
+    let file = if has_ext { name.to_string() } else { format!("{name}.dae") };
     scene_dirs()
         .into_iter()
         .map(|d| d.join(&file))
@@ -133,7 +134,7 @@ pub fn load_bench_scene(name: &str) -> Result<Scene> {
         }
         return Ok(procedural_scene(n as usize));
     }
-    crate::scene::collada::load_file(&find_scene(name)?)
+    crate::scene::load_file(&find_scene(name)?)
 }
 
 /// Camera rays through the pixel centres of a `w x h` frame, scanline order.

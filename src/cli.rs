@@ -7,7 +7,7 @@ use crate::image_io;
 use crate::light::Lights;
 use crate::render::{self, aov, normals::NormalShading, path::PathTracer, Adaptive, Integrator, Region, RenderSettings};
 use crate::scene::Bsdf;
-use crate::scene::{builtin, collada, Scene};
+use crate::scene::{builtin, Scene};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -80,7 +80,12 @@ pub enum IntegratorKind {
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// COLLADA scene (.dae). Without one, the built-in CBspheres_lambertian is rendered.
+    /// Scene file: CS184 COLLADA (.dae), or a mesh as Wavefront OBJ (.obj) or
+    /// PLY (.ply, ASCII or binary). OBJ/PLY carry geometry only, so they get
+    /// fixed defaults: CS184's diffuse 0.5 on every mesh (OBJ materials are
+    /// not read), a hemisphere sky of radiance 1 over +y (bunny.dae's light),
+    /// CS184's camera placement looking along -z with no clipping planes.
+    /// Without a file, the built-in CBspheres_lambertian is rendered.
     pub scene: Option<PathBuf>,
     /// Render threads [default: all cores]
     #[arg(short = 't', value_name = "N")]
@@ -265,7 +270,7 @@ pub fn init_threads(threads: Option<usize>) -> Result<usize> {
 pub fn load_scene(path: Option<&Path>) -> Result<Scene> {
     match path {
         None => builtin::load(),
-        Some(p) => collada::load_file(p),
+        Some(p) => crate::scene::load_file(p),
     }
 }
 

@@ -183,3 +183,89 @@ fn absurd_flags_fail_cleanly() {
         assert!(std::fs::read_dir(&d).unwrap().next().is_none(), "{args:?} left a file behind");
     }
 }
+
+#[test]
+fn obj_and_ply_bad_input_fails_cleanly_in_one_line() {
+    let write = |dir: &Path, name: &str, bytes: &[u8]| {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let d = scratch("obj-missing");
+    expect_failure(&d, &d.join("no_such_mesh.obj"), "cannot read");
+    let d = scratch("obj-index");
+    let p = write(&d, "index.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n");
+    expect_failure(&d, &p, "not a valid OBJ file: face vertex index out of bounds");
+    let d = scratch("obj-nan");
+    let p = write(&d, "nan.obj", b"v 0 0 0\nv NaN 0 0\nv 0 1 0\nf 1 2 3\n");
+    expect_failure(&d, &p, "vertex 1 has a non-finite coordinate");
+    let d = scratch("obj-garbage");
+    let p = write(&d, "garbage.obj", b"v 0 zero 0\n");
+    expect_failure(&d, &p, "not a valid OBJ file");
+    let d = scratch("obj-empty");
+    let p = write(&d, "points.obj", b"v 0 0 0\nv 1 0 0\np 1\nl 1 2\n");
+    expect_failure(&d, &p, "no triangles");
+    let d = scratch("obj-huge");
+    let p = write(&d, "huge.obj", b"v 0 0 0\nv 3e38 0 0\nv 0 1 0\nf 1 2 3\n");
+    expect_failure(&d, &p, "beyond the");
+
+    let header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    let d = scratch("ply-index");
+    let p = write(&d, "index.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").as_bytes());
+    expect_failure(&d, &p, "face 0 uses vertex 7, but there are 3 vertices");
+    let d = scratch("ply-negative");
+    let p = write(&d, "negative.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n").as_bytes());
+    expect_failure(&d, &p, "face 0 uses vertex -1");
+    let d = scratch("ply-two");
+    let p = write(&d, "two.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n2 0 1\n").as_bytes());
+    expect_failure(&d, &p, "face 0 has 2 vertices");
+    let d = scratch("ply-noface");
+    let p = write(&d, "noface.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n");
+    expect_failure(&d, &p, "no 'face' element");
+    let d = scratch("ply-header");
+    let p = write(&d, "header.ply", b"plyx\nformat ascii 1.0\nend_header\n");
+    expect_failure(&d, &p, "not a valid PLY header");
+    let d = scratch("ply-truncated");
+    let mut bin = header.replace("ascii", "binary_little_endian").into_bytes();
+    bin.extend([0u8; 20]); // 36 bytes of vertices needed
+    let p = write(&d, "truncated.ply", &bin);
+    expect_failure(&d, &p, "bad 'vertex' data");
+    let d = scratch("ply-nan");
+    // ASCII PLY has no spelling for NaN; a binary file does.
+    let mut bin = header.replace("ascii", "binary_little_endian").into_bytes();
+    for x in [0.0f32, 0.0, 0.0, 1.0, f32::NAN, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend(x.to_le_bytes());
+    }
+    bin.push(3);
+    for k in [0i32, 1, 2] {
+        bin.extend(k.to_le_bytes());
+    }
+    let p = write(&d, "nan.ply", &bin);
+    expect_failure(&d, &p, "vertex 1 has a missing or non-finite coordinate");
+
+    let d = scratch("unknown-ext");
+    let p = write(&d, "mesh.stl", b"solid x\nendsolid x\n");
+    expect_failure(&d, &p, "unknown scene format 'stl' (expected .dae, .obj or .ply)");
+}
+
+#[test]
+fn an_obj_renders_from_the_command_line_and_a_ply_benchmarks() {
+    let d = scratch("obj-render");
+    let obj = d.join("quad.obj");
+    std::fs::write(&obj, "mtllib quad.mtl\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nv 0 0.5 0\nf 1 2 5\nf 2 3 5\nf 3 4 5\nf 4 1 5\n").unwrap();
+    let png = d.join("quad.png");
+    let out = Command::new(bin()).args(["-r", "32", "24", "-s", "4", "-m", "1", "-f"]).arg(&png).arg(&obj).current_dir(&d).output().unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{stdout}{stderr}");
+    assert!(stderr.contains("OBJ materials (quad.mtl) are not read"), "the ignored mtllib is not reported: {stderr}");
+    assert!(stdout.contains("4 primitives"), "{stdout}");
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert!(img.pixels().any(|p| p.0 != [0, 0, 0]), "black image");
+
+    let ply = d.join("pyramid.ply");
+    std::fs::write(&ply, "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n-1 0 -1\n1 0 -1\n1 0 1\n-1 0 1\n0 1 0\n4 0 1 2 3\n3 0 1 4\n").unwrap();
+    let out = Command::new(bin()).args(["bench", "--rays", "4096", "--no-render", "--backends", "native"]).arg(&ply).current_dir(&d).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("| pyramid | 3 | native |"), "{stdout}");
+}

@@ -117,7 +117,16 @@ impl Box4 {
 
     #[inline]
     fn half_area(&self) -> f32 {
-        let e = (self.hi - self.lo).max(Vec4::ZERO);
+        self.half_area_scaled(1.0)
+    }
+
+    /// Half the area of this box scaled by `s`. The split search measures
+    /// boxes in units of their parent's largest extent: products of raw
+    /// extents overflow f32 from coordinates near 1e18 (and, times the
+    /// block count, sooner), which made the SAH pick arbitrary splits.
+    #[inline]
+    fn half_area_scaled(&self, s: f32) -> f32 {
+        let e = (self.hi - self.lo).max(Vec4::ZERO) * s;
         e.x * e.y + e.y * e.z + e.z * e.x
     }
 
@@ -355,7 +364,12 @@ fn find_split(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<(usize,
 
 fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<(usize, usize, usize)> {
     let n = refs.len();
-    let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
+    let size = (bounds.hi - bounds.lo).truncate().max_element();
+    // A power of two near 1/size: exact, so the costs (and the tree) are
+    // those of the unscaled arithmetic wherever that did not overflow.
+    let exp = (size.to_bits() >> 23) & 0xff;
+    let scale = if size > 0.0 && exp < 254 { f32::from_bits((254 - exp) << 23) } else { 1.0 };
+    let parent_area = bounds.half_area_scaled(scale).max(f32::MIN_POSITIVE);
     let extent = cbounds.hi - cbounds.lo;
     let binning = Binning::new(cbounds, N);
     let bins = if n > PARALLEL_BINNING {
@@ -376,7 +390,7 @@ fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4
         for i in (1..N).rev() {
             acc = acc.union(boxes[i]);
             cnt += counts[i] as usize;
-            right_cost[i] = if cnt > 0 { acc.half_area() * blocks(cnt) } else { 0.0 };
+            right_cost[i] = if cnt > 0 { acc.half_area_scaled(scale) * blocks(cnt) } else { 0.0 };
         }
         let mut acc = Box4::EMPTY;
         let mut cnt = 0;
@@ -386,7 +400,7 @@ fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4
             if cnt == 0 || cnt == n {
                 continue;
             }
-            let cost = TRAVERSAL_COST + (acc.half_area() * blocks(cnt) + right_cost[i + 1]) / parent_area;
+            let cost = TRAVERSAL_COST + (acc.half_area_scaled(scale) * blocks(cnt) + right_cost[i + 1]) / parent_area;
             if best.map_or(true, |b| cost < b.2) {
                 best = Some((axis, i, cost));
             }

@@ -6,4 +6,4 @@ pub mod triangle;
 
 pub use bounds::Aabb;
 pub use sphere::intersect_sphere;
-pub use triangle::{intersect_triangle, RayTransform};
+pub use triangle::{face_normal, intersect_triangle, RayTransform};

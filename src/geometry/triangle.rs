@@ -128,6 +128,26 @@ pub fn intersect_triangle(
     Some((t, e1 * inv, e2 * inv))
 }
 
+/// The unit normal of triangle `abc` (right-handed, a→b→c), or zero when
+/// it is degenerate. Computed in f64: the f32 cross product of the edges and
+/// its squared length overflow from coordinates near 1e9 and underflow near
+/// 1e-10 (a scaled copy of a mesh rendered black: zero normals), while f64
+/// carries any f32 input.
+pub fn face_normal(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    edge_cross(a, b, c).normalize_or_zero().as_vec3()
+}
+
+/// The area of triangle `abc`, computed in f64 (see `face_normal`).
+pub fn area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
+    (0.5 * edge_cross(a, b, c).length()) as f32
+}
+
+/// (b − a) × (c − a) in f64.
+pub fn edge_cross(a: Vec3, b: Vec3, c: Vec3) -> glam::DVec3 {
+    let a = a.as_dvec3();
+    (b.as_dvec3() - a).cross(c.as_dvec3() - a)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -198,7 +198,7 @@ impl Light {
                 let [a, b, c] = m.triangles[i].map(|k| m.positions[k as usize]);
                 let (bu, bv) = uniform_triangle(u.0, u.1);
                 let q = a * (1.0 - bu - bv) + b * bu + c * bv;
-                let n = (b - a).cross(c - a).normalize_or_zero();
+                let n = crate::geometry::face_normal(a, b, c);
                 area_sample(p, q, n, magnitude(&[a, b, c]), *radiance, 1.0 / area)
             }
             Light::Sphere { center, radius, radiance } => {
@@ -287,7 +287,7 @@ impl Lights {
                     let mut acc = 0.0f32;
                     for t in &m.triangles {
                         let [a, b, c] = t.map(|k| m.positions[k as usize]);
-                        acc += 0.5 * (b - a).cross(c - a).length();
+                        acc += crate::geometry::triangle::area(a, b, c);
                         cdf.push(acc);
                     }
                     if acc > 0.0 {

@@ -144,6 +144,7 @@ impl<'a, 'i> Loader<'a, 'i> {
         if scene.shapes.is_empty() {
             crate::bail!("the scene has no geometry");
         }
+        scene.check_extents()?;
         Ok(scene)
     }
 

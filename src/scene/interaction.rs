@@ -58,7 +58,7 @@ impl Interaction {
                 let (u, v) = away_from_edges(a, b, c, u, v, mag);
                 let w = 1.0 - u - v;
                 let p = a * w + b * u + c * v;
-                let ng = (b - a).cross(c - a).normalize_or_zero();
+                let ng = crate::geometry::face_normal(a, b, c);
                 let [na, nb, nc] = tri.map(|i| m.normals[i as usize]);
                 let ns = (na * w + nb * u + nc * v).normalize_or_zero();
                 (p, ng, if ns == Vec3::ZERO { ng } else { ns }, mag)
@@ -86,7 +86,7 @@ const EDGE_ULPS: f32 = 4.0;
 /// edges do not move, so shading elsewhere is unchanged.
 fn away_from_edges(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32, magnitude: f32) -> (f32, f32) {
     let step = EDGE_ULPS * ulp(magnitude);
-    let twice_area = (b - a).cross(c - a).length();
+    let twice_area = 2.0 * crate::geometry::triangle::area(a, b, c);
     // Barycentric of a vertex = distance to the opposite edge / that height.
     let min_bary = |p: Vec3, q: Vec3| {
         let edge = (q - p).length();
