@@ -270,7 +270,11 @@ pub fn init_threads(threads: Option<usize>) -> Result<usize> {
 pub fn load_scene(path: Option<&Path>) -> Result<Scene> {
     match path {
         None => builtin::load(),
-        Some(p) => crate::scene::load_file(p),
+        Some(p) => {
+            // A generator spec (arch:1M) unless a file of that name exists.
+            let generated = if p.exists() { None } else { crate::bench::scenes::generate(&p.to_string_lossy()) };
+            generated.unwrap_or_else(|| crate::scene::load_file(p))
+        }
     }
 }
 

@@ -6,7 +6,17 @@
 //! calling our own sphere test (so `t` is bit-identical to native), geometry
 //! ids are our shape indices (attached by id), invalid rays are filtered here
 //! because Embree's answer to them is undefined. The scene is built with the
-//! ROBUST flag (watertight) and MEDIUM quality.
+//! ROBUST flag (watertight) and MEDIUM quality, Embree's default (binned SAH
+//! for static scenes); `embree-high` builds with HIGH quality, Embree's
+//! spatial-split (SBVH) builder, for the benchmark's build-quality rows.
+
+/// Embree's `RTCBuildQuality`, as the shim numbers it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Quality {
+    Low = 0,
+    Medium = 1,
+    High = 2,
+}
 
 use super::{Hit, Traversal};
 use crate::error::Result;
@@ -36,7 +46,11 @@ mod absent {
     pub struct EmbreeBackend(());
 
     impl EmbreeBackend {
-        pub fn build(_shapes: &[Shape], _threads: usize) -> Result<Self> {
+        pub fn build(shapes: &[Shape], threads: usize) -> Result<Self> {
+            Self::build_with_quality(shapes, threads, super::Quality::Medium)
+        }
+
+        pub fn build_with_quality(_shapes: &[Shape], _threads: usize, _quality: super::Quality) -> Result<Self> {
             crate::bail!("the embree backend is not available in this build: {}", unavailable_reason())
         }
     }
@@ -130,6 +144,10 @@ mod present {
 
     impl EmbreeBackend {
         pub fn build(shapes: &[Shape], threads: usize) -> Result<Self> {
+            Self::build_with_quality(shapes, threads, super::Quality::Medium)
+        }
+
+        pub fn build_with_quality(shapes: &[Shape], threads: usize, quality: super::Quality) -> Result<Self> {
             let mut config = if threads > 0 { format!("threads={threads}") } else { String::new() };
             // Extra device settings for measurements, e.g. "verbose=2" prints
             // Embree's BVH statistics (its SAH cost) after each build.
@@ -145,7 +163,7 @@ mod present {
                 let msg = unsafe { CStr::from_ptr(ffi::pt_device_new_error()) }.to_string_lossy().into_owned();
                 crate::bail!("embree: cannot create a device: {msg}");
             }
-            let scene = unsafe { ffi::pt_scene_new(device, 1, 1) };
+            let scene = unsafe { ffi::pt_scene_new(device, quality as i32, 1) };
             let mut me = EmbreeBackend {
                 device,
                 scene,

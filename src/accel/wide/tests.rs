@@ -315,9 +315,16 @@ fn frustum_accepts_coherent_packets() {
     // frustum only when the caller does not limit the spread.
     let o = Vec3::new(0.5, 0.5, 0.5);
     let fan: Vec<Ray> = (0..16).map(|i| Ray::new(o, Vec3::new(1.0, 0.3 + 0.05 * i as f32, 0.5))).collect();
-    assert!(frustum::Frustum::new(&fan, false).is_some());
     assert!(frustum::Frustum::new(&fan, true).is_none(), "a packet fanned out over 0.75 rad must be traced ray by ray");
     assert!(frustum::Frustum::new(&fan[..2], true).is_some(), "two rays 0.05 apart stay a frustum");
+    assert!(frustum::Frustum::new(&fan[..4], false).is_some(), "camera rays 0.15 apart stay a frustum");
+    assert!(frustum::Frustum::new(&fan[..4], true).is_none());
+    // Camera rays wrapping from the end of one scanline to the start of the
+    // next span the frame: traced ray by ray.
+    let cam = crate::camera::Camera::from_scene(&procedural_scene(100));
+    let row = camera_rays(&cam, 591, 2);
+    assert!(frustum::Frustum::new(&row[583..599], false).is_none(), "a packet wrapping a scanline must fall back");
+    assert!(frustum::Frustum::new(&row[560..576], false).is_some(), "16 neighbours on one scanline are a frustum");
 }
 
 /// A mesh large enough that the build splits it into pieces built in

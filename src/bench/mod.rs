@@ -12,7 +12,9 @@ use crate::ray::Ray;
 use crate::light::Lights;
 use crate::render::{self, normals::NormalShading, path::PathTracer, RenderSettings};
 use crate::rng::Rng;
-use crate::scene::{Scene, Shape, TriangleMesh};
+use crate::scene::{Scene, TriangleMesh};
+
+pub mod scenes;
 use clap::Args;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -36,6 +38,9 @@ pub struct BenchArgs {
     /// path tracing of CBbunny, CBspheres_lambertian, CBspheres and CBgems at 64 spp, -m 5)
     #[arg(long)]
     pub no_render: bool,
+    /// Leave out the peer libraries built in with `--features peers` (obvhs)
+    #[arg(long)]
+    pub no_peers: bool,
     /// Also write the throughput rows as CSV
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
@@ -109,30 +114,18 @@ pub fn lat_long_sphere(segments: u32, rings: u32) -> TriangleMesh {
     m
 }
 
-/// A scene of one procedural sphere of about `n` triangles, with a camera
-/// looking at it from +z.
+/// The `sphere:n` scene (a lat-long sphere of about `n` triangles seen
+/// from +z), for tests.
 pub fn procedural_scene(n: usize) -> Scene {
-    let rings = ((n as f64 / 4.0).sqrt().max(2.0)) as u32;
-    let segments = 2 * rings;
-    let mut scene = crate::scene::builtin::load().expect("built-in scene parses");
-    scene.name = format!("sphere{}k", (2 * segments * rings) / 1000);
-    scene.source = "<procedural>".into();
-    scene.shapes = vec![Shape::Mesh(lat_long_sphere(segments, rings))];
-    scene.objects.truncate(1);
-    scene.objects[0].material = 0;
-    scene.lights.clear();
-    scene.camera.c_dir = Vec3::Z;
-    scene
+    scenes::generate(&format!("sphere:{n}")).expect("sphere is a generator").expect("a valid sphere count")
 }
 
+/// A scene file or name (see `find_scene`), or a generator spec (`scenes`).
 pub fn load_bench_scene(name: &str) -> Result<Scene> {
-    if let Some(n) = name.strip_prefix("sphere:") {
-        let n: f64 = n.trim_end_matches(['m', 'M']).parse().map_err(|_| Error::new(format!("{name}: expected sphere:N")))?;
-        let n = if name.ends_with(['m', 'M']) { n * 1e6 } else { n };
-        if !(n >= 8.0 && n <= 2.0e8) {
-            crate::bail!("{name}: triangle count must be between 8 and 2e8");
+    if !Path::new(name).exists() {
+        if let Some(s) = scenes::generate(name) {
+            return s;
         }
-        return Ok(procedural_scene(n as usize));
     }
     crate::scene::load_file(&find_scene(name)?)
 }
@@ -271,16 +264,60 @@ fn embree_sah(name: &str) -> Option<f64> {
     line.split("sah =").nth(1)?.split_whitespace().next()?.parse().ok()
 }
 
+/// What the benchmark times: one of our backends, or a peer library on the
+/// same rays (built in with `--features peers`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Contender {
+    Backend(BackendKind),
+    #[cfg(feature = "peers")]
+    Obvhs,
+}
+
+impl std::fmt::Display for Contender {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Contender::Backend(k) => write!(f, "{k}"),
+            #[cfg(feature = "peers")]
+            Contender::Obvhs => f.write_str("obvhs"),
+        }
+    }
+}
+
+impl Contender {
+    fn build(self, scene: &Scene, threads: usize) -> Result<accel::Built> {
+        match self {
+            Contender::Backend(k) => accel::build(k, &scene.shapes, threads),
+            #[cfg(feature = "peers")]
+            Contender::Obvhs => {
+                // obvhs builds on rayon's global pool (all threads).
+                let start = Instant::now();
+                let accel = Box::new(accel::obvhs_peer::ObvhsPeer::build(&scene.shapes)?);
+                Ok(accel::Built { accel, build_seconds: start.elapsed().as_secs_f64() })
+            }
+        }
+    }
+}
+
+/// The peers compiled into this binary.
+fn peers() -> Vec<Contender> {
+    #[allow(unused_mut)]
+    let mut v = Vec::new();
+    #[cfg(feature = "peers")]
+    v.push(Contender::Obvhs);
+    v
+}
+
 /// One row of the CSV: `scene, rays, threads, backend, mrays_per_s`.
 pub struct Sample {
     pub scene: String,
     pub rays: &'static str,
     pub threads: usize,
-    pub backend: BackendKind,
+    pub backend: Contender,
     pub mrays_per_s: f64,
 }
 
-fn ratio_table(samples: &[Sample], threads: &[usize]) -> String {
+/// native ÷ `other` throughput per scene, ray kind and thread count.
+fn ratio_table(samples: &[Sample], threads: &[usize], other: Contender) -> String {
     let mut out = String::new();
     let mut scenes: Vec<&str> = Vec::new();
     for s in samples {
@@ -288,7 +325,7 @@ fn ratio_table(samples: &[Sample], threads: &[usize]) -> String {
             scenes.push(&s.scene);
         }
     }
-    let find = |sc: &str, rays: &str, t: usize, b: BackendKind| {
+    let find = |sc: &str, rays: &str, t: usize, b: Contender| {
         samples.iter().find(|s| s.scene == sc && s.rays == rays && s.threads == t && s.backend == b).map(|s| s.mrays_per_s)
     };
     let mut header = String::from("| scene |");
@@ -305,7 +342,7 @@ fn ratio_table(samples: &[Sample], threads: &[usize]) -> String {
         let mut any = false;
         for rays in ["camera", "shadow", "random"] {
             for &t in threads {
-                match (find(sc, rays, t, BackendKind::Native), find(sc, rays, t, BackendKind::Embree)) {
+                match (find(sc, rays, t, Contender::Backend(BackendKind::Native)), find(sc, rays, t, other)) {
                     (Some(n), Some(e)) => {
                         any = true;
                         let _ = write!(row, " {:.2} |", n / e);
@@ -408,12 +445,22 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let mut v = vec![BackendKind::Native];
         if accel::embree::available() {
             v.push(BackendKind::Embree);
+            v.push(BackendKind::EmbreeHigh);
         }
         v.push(BackendKind::Brute);
         v
     } else {
         args.backends.clone()
     };
+    // Ours first, then the peers, brute force last.
+    let mut contenders: Vec<Contender> = backends.iter().filter(|&&k| k != BackendKind::Brute).map(|&k| Contender::Backend(k)).collect();
+    if !args.no_peers {
+        contenders.extend(peers());
+    }
+    if backends.contains(&BackendKind::Brute) {
+        contenders.push(Contender::Backend(BackendKind::Brute));
+    }
+    let brute = Contender::Backend(BackendKind::Brute);
     let names: Vec<String> = if args.scenes.is_empty() { DEFAULT_SCENES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     let mut thread_counts = vec![1];
     if all > 1 {
@@ -452,24 +499,24 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         // TBB threads) or for a noisy stretch of a shared machine. Timed
         // one backend after the other, whichever came first was 5-10 ms
         // slower on the 1M-triangle mesh.
-        let mut build_times: std::collections::HashMap<BackendKind, f64> = Default::default();
+        let mut build_times: std::collections::HashMap<Contender, f64> = Default::default();
         for _ in 0..BUILD_REPS {
-            for &kind in backends.iter().filter(|&&k| k != BackendKind::Brute) {
-                if let Ok(b) = accel::build(kind, &scene.shapes, all) {
+            for &kind in contenders.iter().filter(|&&k| k != brute) {
+                if let Ok(b) = kind.build(&scene, all) {
                     let t = build_times.entry(kind).or_insert(f64::INFINITY);
                     *t = t.min(b.build_seconds);
                 }
             }
         }
-        for &kind in &backends {
-            if kind == BackendKind::Brute && prims > BRUTE_LIMIT {
+        for &kind in &contenders {
+            if kind == brute && prims > BRUTE_LIMIT {
                 let _ = writeln!(md, "| {} | {} | brute | – | – | – | skipped above {} primitives |", scene.name, prims, BRUTE_LIMIT);
                 continue;
             }
-            let built = match accel::build(kind, &scene.shapes, all) {
+            let built = match kind.build(&scene, all) {
                 Ok(b) => b,
                 Err(e) => {
-                    eprintln!("bench: {}: {e}", scene.name);
+                    eprintln!("bench: {}: {kind}: {e}", scene.name);
                     continue;
                 }
             };
@@ -479,7 +526,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 shadow = Some(shadow_rays(&scene, a, &cam));
             }
             let sh = shadow.as_ref().unwrap();
-            let (sub, reps) = if kind == BackendKind::Brute { (32, 1) } else { (1, 3) };
+            let (sub, reps) = if kind == brute { (32, 1) } else { (1, 3) };
             let take = |v: &[Ray]| -> Vec<Ray> { v.iter().step_by(sub).copied().collect() };
             let (cam_s, sh_s, rnd_s) = (take(&cam), take(sh), take(&rnd));
             let mut cells = Vec::new();
@@ -517,7 +564,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         if backends.contains(&BackendKind::Embree) {
             embree_modes(&scene, &cam, &rnd, shadow.as_deref().unwrap_or(&[]), &mut mode_rows)?;
         }
-        if !args.no_render && scene.source != "<procedural>" {
+        if !args.no_render && !scene.source.starts_with("<generated") {
             let mut times = Vec::new();
             for kind in [BackendKind::Native, BackendKind::Brute] {
                 let built = accel::build(kind, &scene.shapes, all)?;
@@ -542,10 +589,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             );
         }
     }
-    let ratios = ratio_table(&samples, &thread_counts);
-    if !ratios.is_empty() {
-        let _ = writeln!(md, "\nnative ÷ Embree throughput, from this run:\n");
-        md.push_str(&ratios);
+    for other in contenders.iter().copied().filter(|&c| c != brute && c != Contender::Backend(BackendKind::Native)) {
+        let ratios = ratio_table(&samples, &thread_counts, other);
+        if !ratios.is_empty() {
+            let _ = writeln!(md, "\nnative ÷ {other} throughput, from this run:\n");
+            md.push_str(&ratios);
+        }
     }
     if !sah_rows.is_empty() {
         let _ = writeln!(
