@@ -9,7 +9,8 @@ cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 
 echo "== test suite (with Embree) =="
-PATHTRACER_REQUIRE_EMBREE=1 cargo test --release
+# With the peer BVH libraries built in (tests/peers.rs checks they answer as native does).
+PATHTRACER_REQUIRE_EMBREE=1 cargo test --release --features peers
 
 echo "== test suite with Embree hidden (PATHTRACER_NO_EMBREE=1) =="
 # The BVH-vs-brute oracle test touches no Embree code and takes two minutes,

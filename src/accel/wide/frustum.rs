@@ -437,7 +437,10 @@ impl<const W: usize> WideBvh<W> {
             }
             let inner = mask & !leaves;
             if inner != 0 {
-                sp = self.push_children(node, inner, &near, &mut stack, sp, !ANY);
+                // Any hit: farthest first (see `ChildOrder`); a packet
+                // stops only once every ray is occluded.
+                let order = if ANY { super::ChildOrder::FarthestFirst } else { super::ChildOrder::NearestFirst };
+                sp = self.push_children(node, inner, &near, &mut stack, sp, order);
             }
             // Pop the nearest child that may still hold a closer hit (the
             // leaves just tested may have shortened the rays).

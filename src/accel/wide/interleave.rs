@@ -123,7 +123,7 @@ impl<const W: usize> WideBvh<W> {
                     w.cur = node.child[mask.trailing_zeros() as usize];
                     return false;
                 }
-                w.sp = self.push_children(node, mask, &near, &mut w.stack, w.sp, true) - 1;
+                w.sp = self.push_children(node, mask, &near, &mut w.stack, w.sp, super::ChildOrder::NearestFirst) - 1;
                 w.cur = w.stack[w.sp].assume_init().0;
                 return false;
             }
