@@ -127,7 +127,8 @@ pub enum BackendKind {
     /// Embree's default).
     Embree,
     /// Embree with HIGH build quality: its spatial-split builder (slower
-    /// builds, fewer box tests per ray). Same answers.
+    /// builds, fewer box tests per ray), which needs the ROBUST flag off,
+    /// so not watertight: the benchmark's build-quality reference.
     #[value(name = "embree-high")]
     EmbreeHigh,
     /// No acceleration: every ray tests every primitive (the test oracle).
