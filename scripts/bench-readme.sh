@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
 # Runs `pathtracer bench` (standard scenes, all backends) and puts its Markdown output into
 # docs/bench.md and into README.md between the bench markers, so that the README's performance
-# tables are the benchmark's output, never typed. Takes a few minutes on 2 cores.
+# tables are the benchmark's output, never typed. Built with the peer BVH libraries
+# (--features peers: obvhs). Takes about 15 minutes on 2 cores (the 1M-10M-triangle
+# generated scenes). `--paste-only` skips the run and pastes the existing docs/bench.md.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo build --release -q
-./target/release/pathtracer bench --markdown docs/bench.md --csv docs/bench.csv "$@"
+if [ "${1:-}" != "--paste-only" ]; then
+    cargo build --release -q --features peers
+    ./target/release/pathtracer bench --markdown docs/bench.md --csv docs/bench.csv "$@"
+fi
 python3 - <<'PY'
 import re
 readme = open("README.md").read()

@@ -28,7 +28,7 @@ pub struct BenchArgs {
     /// found in scenes/ or ../shared/scenes/cs184), or generated scenes of N
     /// triangles: sphere:N, arch:N, grass:N, stadium:N, subdiv:NAME:N (see
     /// `bench::scenes`). Default: cow maxplanck CBbunny beetle sphere:1M
-    /// sphere:5M arch:2M grass:2M stadium:2M subdiv:bunny:2M arch:10M.
+    /// sphere:5M arch:2M grass:2M stadium:2M subdiv:bunny:1.5M arch:10M.
     pub scenes: Vec<String>,
     /// Backends to time [default: native, embree (when built in), brute]
     #[arg(long, value_enum, value_delimiter = ',')]
@@ -54,7 +54,7 @@ pub struct BenchArgs {
 /// The default bench scenes: the CS184 scans, the easy procedural sphere and
 /// the hard generators of `scenes` (1M-10M triangles).
 pub const DEFAULT_SCENES: [&str; 11] =
-    ["cow", "maxplanck", "CBbunny", "beetle", "sphere:1M", "sphere:5M", "arch:2M", "grass:2M", "stadium:2M", "subdiv:bunny:2M", "arch:10M"];
+    ["cow", "maxplanck", "CBbunny", "beetle", "sphere:1M", "sphere:5M", "arch:2M", "grass:2M", "stadium:2M", "subdiv:bunny:1.5M", "arch:10M"];
 
 /// Path-traced render timing (the benchmark's last table): these scenes at
 /// 480x360, 64 spp, -m 5, every backend but brute, same seed. CBspheres (mirror

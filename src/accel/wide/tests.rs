@@ -446,3 +446,35 @@ fn a_hit_at_exactly_tmax_is_found_in_every_mode() {
         assert_eq!((single, coherent, batch), (0, 0, 0), "{name}: hits at exactly tmax missed (single, coherent, batch)");
     }
 }
+
+/// Packets whose interval ray turns out too loose finish ray by ray (the
+/// architecture scene's camera rays skimming its facade, the dense scan's
+/// shadow rays): answers stay those of single rays, bit for bit.
+#[test]
+fn packets_that_give_up_answer_as_single_rays() {
+    use std::sync::atomic::Ordering;
+    let before = frustum::BAILOUTS.load(Ordering::Relaxed);
+    for spec in ["arch:300k", "subdiv:CBbunny:200k"] {
+        let scene = crate::bench::load_bench_scene(spec).unwrap();
+        let bvh = WideBvh::<8>::build(&scene.shapes);
+        let cam = camera_rays(&crate::camera::Camera::from_scene(&scene), 512, 384);
+        let mut packed = vec![None; cam.len()];
+        for (r, h) in cam.chunks(4096).zip(packed.chunks_mut(4096)) {
+            bvh.intersect_coherent(r, h);
+        }
+        for (r, h) in cam.iter().zip(&packed) {
+            assert_eq!(*h, bvh.intersect(r), "{spec}: camera ray {r:?}");
+        }
+        let shadow = crate::bench::shadow_rays(&scene, &bvh, &cam);
+        let mut occ = vec![false; shadow.len()];
+        for (r, o) in shadow.chunks(4096).zip(occ.chunks_mut(4096)) {
+            bvh.occluded_coherent(r, o);
+        }
+        for (r, o) in shadow.iter().zip(&occ) {
+            assert_eq!(*o, bvh.occluded(r), "{spec}: shadow ray {r:?}");
+        }
+    }
+    if avx_available() {
+        assert!(frustum::BAILOUTS.load(Ordering::Relaxed) > before, "no packet gave up: the fallback went untested");
+    }
+}
