@@ -238,7 +238,12 @@ fn bench_writes_csv_and_markdown_tables() {
     assert_eq!(lines.next(), Some("scene,rays,threads,backend,mrays_per_s"));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     let embree = pathtracer::accel::embree::available();
-    let backends: Vec<&str> = if embree { vec!["native", "embree", "brute"] } else { vec!["native", "brute"] };
+    // Every contender: ours, Embree at both qualities, the peers built in.
+    let mut backends: Vec<&str> = if embree { vec!["native", "embree", "embree-high"] } else { vec!["native"] };
+    if cfg!(feature = "peers") {
+        backends.push("obvhs");
+    }
+    backends.push("brute");
     let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let thread_counts = if threads > 1 { 2 } else { 1 };
     assert_eq!(rows.len(), 3 * backends.len() * thread_counts, "{csv}");
@@ -254,7 +259,7 @@ fn bench_writes_csv_and_markdown_tables() {
     assert!(stdout.contains("| cow | 5856 | native |"), "{stdout}");
     assert!(md.contains("| cow | 5856 | native |") && md.contains("| scene | backend | nodes | leaves | total |"), "{md}");
     if embree {
-        assert!(md.contains("native ÷ Embree throughput"), "{md}");
+        assert!(md.contains("native ÷ embree throughput") && md.contains("native ÷ embree-high throughput"), "{md}");
         // Embree's own SAH statistics were read back for the comparison.
         let sah = md.lines().find(|l| l.starts_with("| cow | native | ")).unwrap();
         let cells: Vec<&str> = sah.split('|').map(str::trim).collect();
@@ -262,6 +267,11 @@ fn bench_writes_csv_and_markdown_tables() {
         assert!(ratio > 0.5 && ratio < 2.0, "{sah}");
     } else {
         eprintln!("note: Embree is not built in; the bench's Embree columns were not checked");
+    }
+    if cfg!(feature = "peers") {
+        assert!(md.contains("native ÷ obvhs throughput"), "{md}");
+    } else {
+        eprintln!("note: built without --features peers; the obvhs rows were not checked");
     }
 }
 
