@@ -186,66 +186,48 @@ fn absurd_flags_fail_cleanly() {
 
 #[test]
 fn obj_and_ply_bad_input_fails_cleanly_in_one_line() {
-    let write = |dir: &Path, name: &str, bytes: &[u8]| {
-        let p = dir.join(name);
-        std::fs::write(&p, bytes).unwrap();
-        p
-    };
     let d = scratch("obj-missing");
     expect_failure(&d, &d.join("no_such_mesh.obj"), "cannot read");
-    let d = scratch("obj-index");
-    let p = write(&d, "index.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n");
-    expect_failure(&d, &p, "not a valid OBJ file: face vertex index out of bounds");
-    let d = scratch("obj-nan");
-    let p = write(&d, "nan.obj", b"v 0 0 0\nv NaN 0 0\nv 0 1 0\nf 1 2 3\n");
-    expect_failure(&d, &p, "vertex 1 has a non-finite coordinate");
-    let d = scratch("obj-garbage");
-    let p = write(&d, "garbage.obj", b"v 0 zero 0\n");
-    expect_failure(&d, &p, "not a valid OBJ file");
-    let d = scratch("obj-empty");
-    let p = write(&d, "points.obj", b"v 0 0 0\nv 1 0 0\np 1\nl 1 2\n");
-    expect_failure(&d, &p, "no triangles");
-    let d = scratch("obj-huge");
-    let p = write(&d, "huge.obj", b"v 0 0 0\nv 3e38 0 0\nv 0 1 0\nf 1 2 3\n");
-    expect_failure(&d, &p, "beyond the");
 
     let header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
-    let d = scratch("ply-index");
-    let p = write(&d, "index.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").as_bytes());
-    expect_failure(&d, &p, "face 0 uses vertex 7, but there are 3 vertices");
-    let d = scratch("ply-negative");
-    let p = write(&d, "negative.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n").as_bytes());
-    expect_failure(&d, &p, "face 0 uses vertex -1");
-    let d = scratch("ply-two");
-    let p = write(&d, "two.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n2 0 1\n").as_bytes());
-    expect_failure(&d, &p, "face 0 has 2 vertices");
-    let d = scratch("ply-noface");
-    let p = write(&d, "noface.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n");
-    expect_failure(&d, &p, "no 'face' element");
-    let d = scratch("ply-header");
-    let p = write(&d, "header.ply", b"plyx\nformat ascii 1.0\nend_header\n");
-    expect_failure(&d, &p, "not a valid PLY header");
-    let d = scratch("ply-truncated");
-    let mut bin = header.replace("ascii", "binary_little_endian").into_bytes();
-    bin.extend([0u8; 20]); // 36 bytes of vertices needed
-    let p = write(&d, "truncated.ply", &bin);
-    expect_failure(&d, &p, "bad 'vertex' data");
-    let d = scratch("ply-nan");
+    let binary_header = header.replace("ascii", "binary_little_endian").into_bytes();
+    let mut truncated = binary_header.clone();
+    truncated.extend([0u8; 20]); // 36 bytes of vertices needed
     // ASCII PLY has no spelling for NaN; a binary file does.
-    let mut bin = header.replace("ascii", "binary_little_endian").into_bytes();
+    let mut nan = binary_header.clone();
     for x in [0.0f32, 0.0, 0.0, 1.0, f32::NAN, 0.0, 0.0, 1.0, 0.0] {
-        bin.extend(x.to_le_bytes());
+        nan.extend(x.to_le_bytes());
     }
-    bin.push(3);
+    nan.push(3);
     for k in [0i32, 1, 2] {
-        bin.extend(k.to_le_bytes());
+        nan.extend(k.to_le_bytes());
     }
-    let p = write(&d, "nan.ply", &bin);
-    expect_failure(&d, &p, "vertex 1 has a missing or non-finite coordinate");
-
-    let d = scratch("unknown-ext");
-    let p = write(&d, "mesh.stl", b"solid x\nendsolid x\n");
-    expect_failure(&d, &p, "unknown scene format 'stl' (expected .dae, .obj or .ply)");
+    let cases: [(&str, Vec<u8>, &str); 13] = [
+        ("index.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n".to_vec(), "not a valid OBJ file: face vertex index out of bounds"),
+        ("nan.obj", b"v 0 0 0\nv NaN 0 0\nv 0 1 0\nf 1 2 3\n".to_vec(), "vertex 1 has a non-finite coordinate"),
+        ("garbage.obj", b"v 0 zero 0\n".to_vec(), "not a valid OBJ file"),
+        ("points.obj", b"v 0 0 0\nv 1 0 0\np 1\nl 1 2\n".to_vec(), "no triangles"),
+        ("huge.obj", b"v 0 0 0\nv 3e38 0 0\nv 0 1 0\nf 1 2 3\n".to_vec(), "beyond the"),
+        ("index.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").into_bytes(), "face 0 uses vertex 7, but there are 3 vertices"),
+        ("negative.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n").into_bytes(), "face 0 uses vertex -1"),
+        ("two.ply", format!("{header}0 0 0\n1 0 0\n0 1 0\n2 0 1\n").into_bytes(), "face 0 has 2 vertices"),
+        (
+            "noface.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n".to_vec(),
+            "no 'face' element",
+        ),
+        ("header.ply", b"plyx\nformat ascii 1.0\nend_header\n".to_vec(), "not a valid PLY header"),
+        ("truncated.ply", truncated, "bad 'vertex' data"),
+        ("nan.ply", nan, "vertex 1 has a missing or non-finite coordinate"),
+        ("mesh.stl", b"solid x\nendsolid x\n".to_vec(), "unknown scene format 'stl' (expected .dae, .obj or .ply)"),
+    ];
+    for (file, bytes, expect) in cases {
+        // Each case in its own folder: `expect_failure` checks nothing else is left there.
+        let d = scratch(&format!("bad-{file}"));
+        let p = d.join(file);
+        std::fs::write(&p, bytes).unwrap();
+        expect_failure(&d, &p, expect);
+    }
 }
 
 #[test]

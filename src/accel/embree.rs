@@ -12,6 +12,11 @@
 //! reports the plain SAH builder): it is the benchmark's reference for
 //! spatial-split (SBVH) build quality, not watertight, not for renders.
 
+use super::{Hit, Traversal};
+use crate::error::Result;
+use crate::ray::Ray;
+use crate::scene::Shape;
+
 /// Embree's `RTCBuildQuality`, as the shim numbers it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Quality {
@@ -19,11 +24,6 @@ pub enum Quality {
     Medium = 1,
     High = 2,
 }
-
-use super::{Hit, Traversal};
-use crate::error::Result;
-use crate::ray::Ray;
-use crate::scene::Shape;
 
 /// Whether this build has the Embree backend.
 pub fn available() -> bool {

@@ -13,14 +13,14 @@ use crate::light::Lights;
 use crate::render::{self, normals::NormalShading, path::PathTracer, RenderSettings};
 use crate::rng::Rng;
 use crate::scene::{Scene, TriangleMesh};
-
-pub mod scenes;
 use clap::Args;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+pub mod scenes;
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
@@ -30,7 +30,8 @@ pub struct BenchArgs {
     /// `bench::scenes`). Default: cow maxplanck CBbunny beetle sphere:1M
     /// sphere:5M arch:2M grass:2M stadium:2M subdiv:bunny:1.5M arch:10M.
     pub scenes: Vec<String>,
-    /// Backends to time [default: native, embree (when built in), brute]
+    /// Backends to time [default: native, embree and embree-high (when built
+    /// in), brute]; the peers built in are timed too unless --no-peers
     #[arg(long, value_enum, value_delimiter = ',')]
     pub backends: Vec<BackendKind>,
     /// Rays per throughput measurement (brute uses a 1/32 subset)

@@ -15,7 +15,7 @@ use std::path::Path;
 /// Load a scene file.
 pub fn load_file(path: &Path) -> Result<Scene> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::new(format!("{}: cannot read: {}", path.display(), e)))?;
-    let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
+    let name = super::name_of(path);
     parse(&text, &name, &path.display().to_string())
 }
 

@@ -50,6 +50,12 @@ pub const MAX_COORDINATE: f32 = 1.0e12;
 /// The smallest size (largest side of the bounding box) a scene may have.
 pub const MIN_EXTENT: f32 = 1.0e-9;
 
+/// A scene's name: its file's base name without the extension (CS184's
+/// `pathtracer_filename`).
+pub(crate) fn name_of(path: &std::path::Path) -> String {
+    path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into())
+}
+
 /// Load a scene file by its extension: `.dae` (CS184 COLLADA), `.obj`, `.ply`.
 pub fn load_file(path: &std::path::Path) -> crate::error::Result<Scene> {
     let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();

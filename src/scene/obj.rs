@@ -1,7 +1,7 @@
 //! Wavefront OBJ scenes, read with the `tobj` crate: `v`, `vn` and `f`
 //! (polygons fan-triangulated, negative indices allowed), one mesh per `o`/`g`
 //! group. Geometry only: materials, light and camera are
-//! [`mesh_scene`](super::mesh_scene)'s defaults. `mtllib`/`usemtl` are not
+//! [`mesh_scene`]'s defaults. `mtllib`/`usemtl` are not
 //! read — the loader says so on stderr rather than dropping them silently.
 //! Points and lines are skipped (they have no surface to render).
 
@@ -14,10 +14,8 @@ use std::path::Path;
 
 pub fn load_file(path: &Path) -> Result<Scene> {
     let file = std::fs::File::open(path).map_err(|e| Error::new(format!("{}: cannot read: {e}", path.display())))?;
-    let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
-    let source = path.display().to_string();
-    let scene = parse(&mut std::io::BufReader::new(file), &name, &source)?;
-    Ok(scene)
+    let name = super::name_of(path);
+    parse(&mut std::io::BufReader::new(file), &name, &path.display().to_string())
 }
 
 /// Parse OBJ text from `reader`; `source` names it in messages.

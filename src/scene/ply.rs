@@ -3,7 +3,7 @@
 //! `nx ny nz` when present), `face` elements (a `vertex_indices` or
 //! `vertex_index` list, polygons fan-triangulated). Other elements and
 //! properties (colours, confidence, edges) are skipped. Geometry only:
-//! materials, light and camera are [`mesh_scene`](super::mesh_scene)'s
+//! materials, light and camera are [`mesh_scene`]'s
 //! defaults.
 
 use super::mesh_scene::{self, NamedMesh};
@@ -16,7 +16,7 @@ use std::path::Path;
 
 pub fn load_file(path: &Path) -> Result<Scene> {
     let file = std::fs::File::open(path).map_err(|e| Error::new(format!("{}: cannot read: {e}", path.display())))?;
-    let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
+    let name = super::name_of(path);
     parse(std::io::BufReader::new(file), &name, &path.display().to_string())
 }
 

@@ -399,8 +399,6 @@ impl<const W: usize> WideBvh<W> {
     }
 }
 
-/// Pop stacked children until one whose entry distance is within `tmax`
-/// (a subtree starting beyond it cannot hold a closer hit); `None` when the
 /// The order a node's entered children are visited in.
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub(super) enum ChildOrder {
@@ -422,6 +420,8 @@ pub(super) enum ChildOrder {
     FarthestFirst,
 }
 
+/// Pop stacked children until one whose entry distance is within `tmax`
+/// (a subtree starting beyond it cannot hold a closer hit); `None` when the
 /// stack runs out.
 #[inline(always)]
 fn pop_within(stack: &[MaybeUninit<(u32, f32)>; STACK], sp: &mut usize, tmax: f32) -> Option<u32> {
