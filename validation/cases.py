@@ -48,8 +48,9 @@ ALL = BOTH + ["povray"]  # POV-Ray: direct lighting only
 
 
 TIERS = {
-    # width, height, our spp, reference spp per render, reference renders, spp ladder, cases
-    "quick": dict(w=64, h=48, spp=256, ref_spp=128, ref_renders=16, ladder=[4, 16, 64], pov_supersample=4, pov_lightlets=8, cases=[
+    # width, height, our spp, reference spp per render, reference renders, spp ladder (error
+    # against time) with independent renders per rung, cases
+    "quick": dict(w=64, h=48, spp=256, ref_spp=128, ref_renders=16, ladder=[4, 16, 64], ladder_seeds=4, pov_supersample=4, pov_lightlets=8, cases=[
         radiance(CB, 1, ALL),
         radiance(CB, 1, ["cycles"], ["-H"], "hemisphere sampling", spp_scale=16),
         radiance(CB, 5, BOTH),
@@ -61,7 +62,7 @@ TIERS = {
         geometry(CB),
         geometry("hard_tiny.dae"),
     ]),
-    "full": dict(w=256, h=192, spp=1024, ref_spp=256, ref_renders=16, ladder=[4, 16, 64, 256], pov_supersample=2, pov_lightlets=16, cases=[
+    "full": dict(w=256, h=192, spp=1024, ref_spp=256, ref_renders=16, ladder=[4, 16, 64, 256], ladder_seeds=4, pov_supersample=2, pov_lightlets=16, cases=[
         radiance(CB, 1, ALL),
         radiance(CB, 1, BOTH, ["-H"], "hemisphere sampling", spp_scale=16),
         radiance(CB, 2, BOTH),

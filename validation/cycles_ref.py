@@ -68,6 +68,7 @@ def parse_args(argv):
     ap.add_argument("--spp", type=int, required=True)
     ap.add_argument("--renders", type=int, default=1)
     ap.add_argument("--ladder", default="", help="also time single renders at these spp")
+    ap.add_argument("--ladder-seeds", type=int, default=1, help="independent renders per ladder rung")
     ap.add_argument("--threads", type=int, default=0, help="0: all cores")
     ap.add_argument("--out", required=True, help="prefix: <out>_r<k>.exr, <out>_spp<N>.exr, <out>_cycles.json")
     return ap.parse_args(argv)
@@ -510,12 +511,17 @@ def main():
     w, h = build(spec, args.scene, args.mode)
     configure(w, h, args.mode, args.max_depth, args.threads)
     meta = {"renderer": f"cycles (blender {bpy.app.version_string})", "mode": args.mode, "spp_per_render": args.spp, "renders": [], "ladder": []}
+    # The first render of a session pays one-time costs (kernel and image set-up): one
+    # untimed 1-spp render first, so neither the renders nor the ladder carry them.
+    render(f"{args.out}_warmup.exr", 1, 0)
+    os.remove(f"{args.out}_warmup.exr")
     for k in range(args.renders):
         p = f"{args.out}_r{k}.exr"
         meta["renders"].append({"file": p, "seconds": render(p, args.spp, 1 + k)})
     for n in [int(x) for x in args.ladder.split(",") if x]:
-        p = f"{args.out}_spp{n}.exr"
-        meta["ladder"].append({"spp": n, "file": p, "seconds": render(p, n, 1000 + n)})
+        for k in range(args.ladder_seeds):
+            p = f"{args.out}_spp{n}_k{k}.exr"
+            meta["ladder"].append({"spp": n, "seed_index": k, "file": p, "seconds": render(p, n, 1000 + n + 7919 * k)})
     with open(args.out + "_cycles.json", "w") as f:
         json.dump(meta, f)
 

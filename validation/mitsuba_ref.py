@@ -185,7 +185,8 @@ def main():
     ap.add_argument("--spp", type=int, required=True, help="samples per pixel per render")
     ap.add_argument("--renders", type=int, default=16, help="independent renders (for the variance)")
     ap.add_argument("--out", required=True, help="output prefix: <out>.exr, <out>_var.exr, <out>.json")
-    ap.add_argument("--ladder", default="", help="also time single renders at these spp (comma-separated): <out>_spp<N>.exr")
+    ap.add_argument("--ladder", default="", help="also time single renders at these spp (comma-separated): <out>_spp<N>_k<K>.exr")
+    ap.add_argument("--ladder-seeds", type=int, default=1, help="independent renders per ladder rung (their spread is the rung's error, their median time its time)")
     args = ap.parse_args()
     import time
 
@@ -199,28 +200,36 @@ def main():
     scene = mi.load_dict(sd)
     if tex is not None:
         check_envmap(scene, tex)
+    # The first render of a loaded scene pays one-time costs (thread pool, caches): an
+    # untimed 1-spp render first, so neither the renders nor the ladder carry them.
+    mi.render(scene, spp=1, seed=0)
     t0 = time.time()
     images = []
     for k in range(args.renders):
         images.append(np.array(mi.render(scene, spp=args.spp, seed=1 + k), dtype=np.float64))
     seconds = time.time() - t0
-    stack = np.stack(images)
-    mean = stack.mean(axis=0)
-    var_of_mean = stack.var(axis=0, ddof=1) / args.renders
-    mi.Bitmap(mean.astype(np.float32)).write(args.out + ".exr")
-    mi.Bitmap(var_of_mean.astype(np.float32)).write(args.out + "_var.exr")
-    with open(args.out + ".json", "w") as f:
-        json.dump({"renderer": f"mitsuba {mi.__version__} scalar_rgb", "spp": args.spp * args.renders, "renders": args.renders, "seconds": seconds,
-                   "image_means": [float(i.mean()) for i in images]}, f)
+    if images:
+        stack = np.stack(images)
+        mean = stack.mean(axis=0)
+        var_of_mean = stack.var(axis=0, ddof=1) / args.renders
+        mi.Bitmap(mean.astype(np.float32)).write(args.out + ".exr")
+        mi.Bitmap(var_of_mean.astype(np.float32)).write(args.out + "_var.exr")
+        with open(args.out + ".json", "w") as f:
+            json.dump({"renderer": f"mitsuba {mi.__version__} scalar_rgb", "spp": args.spp * args.renders, "renders": args.renders, "seconds": seconds,
+                       "image_means": [float(i.mean()) for i in images]}, f)
+        print(f"mitsuba: {args.renders} x {args.spp} spp in {seconds:.1f} s")
+    # The ladder: rung by rung, seed by seed, each render timed on its own (scene
+    # loading excluded, as for every renderer).
     ladder = []
     for n in [int(x) for x in args.ladder.split(",") if x]:
-        t0 = time.time()
-        img = np.array(mi.render(scene, spp=n, seed=1000 + n), dtype=np.float32)
-        ladder.append({"spp": n, "seconds": time.time() - t0, "file": f"{args.out}_spp{n}.exr"})
-        mi.Bitmap(img).write(ladder[-1]["file"])
-    with open(args.out + "_ladder.json", "w") as f:
-        json.dump(ladder, f)
-    print(f"mitsuba: {args.renders} x {args.spp} spp in {seconds:.1f} s")
+        for k in range(args.ladder_seeds):
+            t0 = time.time()
+            img = np.array(mi.render(scene, spp=n, seed=1000 + n + 7919 * k), dtype=np.float32)
+            ladder.append({"spp": n, "seed_index": k, "seconds": time.time() - t0, "file": f"{args.out}_spp{n}_k{k}.exr"})
+            mi.Bitmap(img).write(ladder[-1]["file"])
+    if ladder:
+        with open(args.out + "_ladder.json", "w") as f:
+            json.dump(ladder, f)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ sys.path.insert(0, HERE)
 import stats  # noqa: E402
 from cases import BATCHES, TIERS, find_scene  # noqa: E402
 from images import read_exr, to_png, write_png, write_zmap  # noqa: E402
-from metrics import equal_time_ratio, flip_error, from_renders, interp_loglog, rel_mse  # noqa: E402
+from metrics import equal_time_ratio, flip_error, from_renders, interp_loglog, ladder_curve, rel_mse  # noqa: E402
 from report import write_report  # noqa: E402
 def normalise_export(src, dst):
     """A copy of an exported scene moved and scaled into the references' comfort zone: moved
@@ -154,15 +154,14 @@ class Harness:
                 h.update(p.encode() + f.read())
         return [scene, *extra], h.hexdigest()[:16], d
 
-    # ---- references: each returns {renderer, mean, var, image_means, spp, seconds, curve} ----
+    # ---- references: each returns {renderer, mean, var, image_means, spp, seconds} ----
 
     def mitsuba(self, scene_dir, key, m):
         t = self.t
-        lad = ",".join(str(n) for n in t["ladder"])
-        ref = os.path.join(self.cache, f"mitsuba_{key}_m{m}_{t['ref_spp']}x{t['ref_renders']}_l{lad.replace(',', '-')}")
-        if not os.path.exists(ref + "_ladder.json"):
+        ref = os.path.join(self.cache, f"mitsuba_{key}_m{m}_{t['ref_spp']}x{t['ref_renders']}")
+        if not os.path.exists(ref + ".json"):
             r = subprocess.run([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), scene_dir, "--max-depth", str(m), "--spp", str(t["ref_spp"]),
-                                "--renders", str(t["ref_renders"]), "--out", ref, "--ladder", lad], capture_output=True, text=True)
+                                "--renders", str(t["ref_renders"]), "--out", ref], capture_output=True, text=True)
             if r.returncode == 3:
                 return {"refused": r.stderr.strip()}
             if r.returncode != 0:
@@ -170,24 +169,20 @@ class Harness:
         mean = read_exr(ref + ".exr")
         with open(ref + ".json") as f:
             meta = json.load(f)
-        with open(ref + "_ladder.json") as f:
-            curve = [{"spp": p["spp"], "seconds": p["seconds"], "rel_mse": rel_mse(read_exr(p["file"]), mean)} for p in json.load(f)]
         return {"renderer": meta["renderer"], "mean": mean, "var": read_exr(ref + "_var.exr"), "image_means": meta["image_means"], "spp": meta["spp"],
-                "seconds": meta["seconds"], "curve": curve}
+                "seconds": meta["seconds"]}
 
-    def cycles(self, scene_dir, key, m, mode="radiance", spp=None, renders=None, ladder=None):
+    def cycles(self, scene_dir, key, m, mode="radiance", spp=None, renders=None):
         if not self.blender:
             sys.exit("run_cases: blender not found (validation/setup installs Debian's blender)")
         t = self.t
         spp = spp or t["ref_spp"]
         renders = renders or t["ref_renders"]
-        ladder = t["ladder"] if ladder is None else ladder
-        lad = ",".join(str(n) for n in ladder)
-        ref = os.path.join(self.cache, f"cycles_{key}_{mode}_m{m}_{spp}x{renders}_l{lad.replace(',', '-')}")
+        ref = os.path.join(self.cache, f"cycles_{key}_{mode}_m{m}_{spp}x{renders}")
         if not os.path.exists(ref + "_cycles.json"):
             r = subprocess.run([self.blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--",
-                                scene_dir, "--mode", mode, "--max-depth", str(m), "--spp", str(spp), "--renders", str(renders), "--ladder", lad,
-                                "--out", ref], capture_output=True, text=True)
+                                scene_dir, "--mode", mode, "--max-depth", str(m), "--spp", str(spp), "--renders", str(renders), "--out", ref],
+                               capture_output=True, text=True)
             if r.returncode == 3 or "cannot represent exactly" in r.stderr:
                 return {"refused": [l for l in r.stderr.splitlines() if "cycles_ref" in l][-1]}
             if r.returncode != 0 or not os.path.exists(ref + "_cycles.json"):
@@ -195,8 +190,30 @@ class Harness:
         with open(ref + "_cycles.json") as f:
             meta = json.load(f)
         out = from_renders([read_exr(p["file"]) for p in meta["renders"]], meta)
-        curve = [{"spp": p["spp"], "seconds": p["seconds"], "rel_mse": rel_mse(read_exr(p["file"]), out["mean"])} for p in meta["ladder"]]
-        return {**out, "renderer": meta["renderer"], "spp": spp * len(out["renders"]), "curve": curve}
+        return {**out, "renderer": meta["renderer"], "spp": spp * len(out["renders"])}
+
+    def reference_ladder(self, rname, scene_dir, m, folder):
+        """The reference's error-against-time ladder, rendered and timed afresh on every run
+        (never cached: a timing is only comparable with ours when measured in the same
+        run): `ladder_seeds` independent renders per rung, each timed on its own inside
+        the renderer's process (process start and scene loading excluded, as for ours).
+        Returns [(spp, seconds, image)]."""
+        t = self.t
+        lad = ",".join(str(n) for n in t["ladder"])
+        out = os.path.join(folder, f"{rname}_ladder")
+        if rname == "mitsuba":
+            sh([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), scene_dir, "--max-depth", str(m), "--spp", "1", "--renders", "0",
+                "--ladder", lad, "--ladder-seeds", str(t["ladder_seeds"]), "--out", out])
+            with open(out + "_ladder.json") as f:
+                runs = json.load(f)
+        elif rname == "cycles":
+            sh([self.blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--", scene_dir,
+                "--mode", "radiance", "--max-depth", str(m), "--spp", "1", "--renders", "0", "--ladder", lad, "--ladder-seeds", str(t["ladder_seeds"]), "--out", out])
+            with open(out + "_cycles.json") as f:
+                runs = json.load(f)["ladder"]
+        else:
+            return []
+        return [(p["spp"], p["seconds"], read_exr(p["file"])) for p in runs]
 
     def povray(self, scene_dir, key, m):
         """Direct lighting only (POV-Ray has no unbiased global illumination)."""
@@ -218,7 +235,7 @@ class Harness:
         for p in meta["renders"]:
             a = read_exr(p["file"])
             imgs.append(a.reshape(a.shape[0] // S, S, a.shape[1] // S, S, 3).mean(axis=(1, 3)))
-        return {**from_renders(imgs, meta), "renderer": f"{meta['renderer']}, {n}x{n} lightlets, {S}x{S} rays/px", "spp": S * S * len(imgs), "curve": []}
+        return {**from_renders(imgs, meta), "renderer": f"{meta['renderer']}, {n}x{n} lightlets, {S}x{S} rays/px", "spp": S * S * len(imgs)}
 
     # ---- ours ----
 
@@ -237,14 +254,16 @@ class Harness:
         return np.mean(xs, axis=0), np.mean(vs, axis=0) / batches, [float(i.mean()) for i in xs], time.time() - t0, xs
 
     def ladder(self, scene_args, folder, backend, args):
-        """(spp, seconds, image) for each spp of the ladder: the error-vs-time curve's points,
-        timed as our summary line reports (process start and scene loading excluded, as for
-        the references)."""
+        """Our error-against-time ladder: `ladder_seeds` independent renders (seeds) per spp
+        rung, each timed by its summary line (process start, scene loading and BVH build
+        excluded, as the references' timings exclude theirs). Returns [(spp, seconds, image)]."""
         runs = []
         for n in self.t["ladder"]:
-            exr = os.path.join(folder, f"{backend}_spp{n}.exr")
-            text = sh([self.pt, *scene_args, *self.view, "-s", str(n), *args, "--backend", backend, "--seed", str(100 + n), "-f", os.path.join(folder, f"{backend}_spp{n}.png"), "--exr", exr])
-            runs.append((n, float(text.split("| render ")[1].split(" s")[0]), read_exr(exr)))
+            for k in range(self.t["ladder_seeds"]):
+                exr = os.path.join(folder, f"{backend}_spp{n}_k{k}.exr")
+                text = sh([self.pt, *scene_args, *self.view, "-s", str(n), *args, "--backend", backend, "--seed", str(100 + n + 7919 * k),
+                           "-f", os.path.join(folder, f"{backend}_spp{n}_k{k}.png"), "--exr", exr])
+                runs.append((n, float(text.split("| render ")[1].split(" s")[0]), read_exr(exr)))
         return runs
 
     # ---- cases ----
@@ -264,6 +283,7 @@ class Harness:
                 continue
             refs[rname] = ref
             write_png(os.path.join(folder, f"{rname}.png"), to_png(ref["mean"]))
+        ref_ladders = {rname: self.reference_ladder(rname, ref_dir, case["m"], folder) for rname in refs}
         for backend in self.backends:
             spp = self.t["spp"] * case["spp_scale"]
             x, var_x, means_x, seconds, xs = self.ours(scene_args, folder, backend, args, spp, BATCHES, "img")
@@ -276,12 +296,16 @@ class Harness:
                 worst = np.argsort(-np.abs(z).max(-1), axis=None)[:8]
                 v["worst_pixels"] = [{"y": int(i // z.shape[1]), "x": int(i % z.shape[1]), "ours": x.reshape(-1, 3)[i].tolist(), "reference": ref["mean"].reshape(-1, 3)[i].tolist(),
                                       "z": z.reshape(-1, 3)[i].tolist()} for i in worst]
-                ladder = [{"spp": n, "seconds": s, "rel_mse": rel_mse(img, ref["mean"])} for n, s, img in ladder_runs]
+                # Both curves measure error against the same image (the reference's mean), so
+                # the ratio compares the two renderers' noise, not their agreement (the
+                # verdict tests that).
+                ours_c, ref_c = ladder_curve(ladder_runs, ref["mean"]), ladder_curve(ref_ladders[rname], ref["mean"])
                 v.update({"kind": "radiance", "case": cid, "label": case["label"], "scene": name, "max_depth": case["m"], "flags": case["flags"], "backend": backend,
                           "reference": rname, "reference_renderer": ref["renderer"], "spp": spp, "seconds": seconds, "reference_spp": ref["spp"],
-                          "reference_seconds": ref["seconds"], "size": [self.t["w"], self.t["h"]], "curve": ladder, "reference_curve": ref["curve"],
+                          "reference_seconds": ref["seconds"], "size": [self.t["w"], self.t["h"]], "curve": ours_c["curve"], "reference_curve": ref_c["curve"],
+                          "timing": {"ours": ours_c["fit"], "reference": ref_c["fit"]},
                           "reference_noise_floor": float(np.mean(ref["var"] / (ref["mean"] ** 2 + 1e-2))),
-                          "equal_time_rel_mse_ratio": equal_time_ratio(ladder, ref["curve"]),
+                          "equal_time_rel_mse_ratio": equal_time_ratio(ours_c["curve"], ref_c["curve"]),
                           "flip": flip_error(x, ref["mean"])})
                 results.append(v)
                 eq = v["equal_time_rel_mse_ratio"]
@@ -418,7 +442,7 @@ class Harness:
         # Depths of a normalised reference scene are in its units.
         pov["depth"] = pov["depth"] / self.ref_scale
         # Cycles: pixel averages over the box filter, independent renders.
-        cyc = {mode: self.cycles(sc, key, 1, mode, spp=64, renders=8, ladder=[]) for mode in ("object-id", "depth", "normal")}
+        cyc = {mode: self.cycles(sc, key, 1, mode, spp=64, renders=8) for mode in ("object-id", "depth", "normal")}
         if "refused" not in cyc["depth"]:
             d = cyc["depth"]
             d["mean"], d["var"], d["renders"] = d["mean"] / self.ref_scale, d["var"] / self.ref_scale ** 2, [r / self.ref_scale for r in d["renders"]]
