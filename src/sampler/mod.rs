@@ -54,6 +54,8 @@ pub struct Sampler {
     kind: SamplerKind,
     pixel_seed: u64,
     index: u32,
+    /// `index` as the Sobol draws take it (`sobol::reversed_index`).
+    rev_index: u32,
     /// Every sample index of the render is below 2^index_bits.
     index_bits: u32,
     /// The path vertex the slot draws are for (1 = the camera ray's hit).
@@ -64,13 +66,14 @@ impl Sampler {
     /// The draws of pixel (x, y) of a render of `spp` samples per pixel.
     pub fn for_pixel(kind: SamplerKind, seed: u64, x: u32, y: u32, spp: u32) -> Sampler {
         let index_bits = 32 - spp.saturating_sub(1).leading_zeros();
-        Sampler { kind, pixel_seed: mix64(seed ^ mix64(((y as u64) << 32) | x as u64)), index: 0, index_bits, bounce: 1 }
+        Sampler { kind, pixel_seed: mix64(seed ^ mix64(((y as u64) << 32) | x as u64)), index: 0, rev_index: 0, index_bits, bounce: 1 }
     }
 
     /// Draw for sample `index`, from its camera ray on.
     pub fn start(&mut self, index: u32) {
         debug_assert!(self.index_bits == 32 || index >> self.index_bits == 0, "index {index} of 2^{}", self.index_bits);
         self.index = index;
+        self.rev_index = sobol::reversed_index(index, self.index_bits);
         self.bounce = 1;
     }
 
@@ -110,7 +113,7 @@ impl Sampler {
     pub fn get_1d(&self, dim: u64) -> f32 {
         match self.kind {
             SamplerKind::Independent => sobol::to_unit(self.hashed(dim) as u32),
-            SamplerKind::Sobol => sobol::sample_1d(self.pixel_seed, dim, self.index, self.index_bits),
+            SamplerKind::Sobol => sobol::sample_1d(self.pixel_seed, dim, self.rev_index, self.index_bits),
         }
     }
 
@@ -121,7 +124,7 @@ impl Sampler {
                 let h = self.hashed(dim);
                 (sobol::to_unit(h as u32), sobol::to_unit((h >> 32) as u32))
             }
-            SamplerKind::Sobol => sobol::sample_2d(self.pixel_seed, dim, self.index, self.index_bits),
+            SamplerKind::Sobol => sobol::sample_2d(self.pixel_seed, dim, self.rev_index, self.index_bits),
         }
     }
 }

@@ -37,30 +37,64 @@ const DIRECTIONS: [u32; 32] = {
 /// Sobol dimensions 0 and 1 of index `i`, as 32-bit fractions.
 #[inline]
 pub fn sobol2(i: u32) -> (u32, u32) {
-    let mut y = 0;
-    let mut bits = i;
-    let mut k = 0;
-    while bits != 0 {
-        if bits & 1 != 0 {
-            y ^= DIRECTIONS[k];
-        }
-        bits >>= 1;
-        k += 1;
+    (i.reverse_bits(), sobol_y_reversed(i).reverse_bits())
+}
+
+/// Sobol dimension 1 of index `i`, bit-reversed: the XOR of the reversed
+/// direction words of `i`'s set bits, a byte of `i` at a time from tables
+/// (a loop over the bits mispredicts its branch on every other bit).
+#[inline]
+fn sobol_y_reversed(i: u32) -> u32 {
+    let t = &Y_REVERSED;
+    let lo = t[0][(i & 0xff) as usize];
+    if i < 256 {
+        return lo; // every render below 257 spp
     }
-    (i.reverse_bits(), y)
+    lo ^ t[1][((i >> 8) & 0xff) as usize] ^ t[2][((i >> 16) & 0xff) as usize] ^ t[3][(i >> 24) as usize]
+}
+
+/// `Y_REVERSED[b][v]`: the XOR of `DIRECTIONS[8b + t].reverse_bits()` over
+/// the set bits t of byte v.
+static Y_REVERSED: [[u32; 256]; 4] = {
+    let mut t = [[0u32; 256]; 4];
+    let mut b = 0;
+    while b < 4 {
+        let mut v = 0;
+        while v < 256 {
+            let mut x = 0u32;
+            let mut k = 0;
+            while k < 8 {
+                if v & (1 << k) != 0 {
+                    x ^= DIRECTIONS[8 * b + k].reverse_bits();
+                }
+                k += 1;
+            }
+            t[b][v] = x;
+            v += 1;
+        }
+        b += 1;
+    }
+    t
+};
+
+/// The scrambling hash on bit-reversed values: output bit k depends only
+/// on input bits 0..=k (low to high), so reversing before and after makes
+/// it a nested scramble from the top bit down (`owen`).
+#[inline]
+fn scramble_reversed(mut x: u32, seed: u32) -> u32 {
+    x ^= x.wrapping_mul(0x3d20_adea);
+    x = x.wrapping_add(seed);
+    x = x.wrapping_mul((seed >> 16) | 1);
+    x ^= x.wrapping_mul(0x0552_6c56);
+    x ^= x.wrapping_mul(0x53a2_2864);
+    x
 }
 
 /// Base-2 nested uniform (Owen) scrambling of `v`: bit b (from the top) is
 /// flipped by a pseudo-random function of `seed` and the bits above it.
 #[inline]
 pub fn owen(v: u32, seed: u32) -> u32 {
-    let mut x = v.reverse_bits();
-    x ^= x.wrapping_mul(0x3d20_adea);
-    x = x.wrapping_add(seed);
-    x = x.wrapping_mul((seed >> 16) | 1);
-    x ^= x.wrapping_mul(0x0552_6c56);
-    x ^= x.wrapping_mul(0x53a2_2864);
-    x.reverse_bits()
+    scramble_reversed(v.reverse_bits(), seed).reverse_bits()
 }
 
 /// Three 32-bit scramble seeds (index, x, y) of (pixel seed, dimension id),
@@ -77,32 +111,48 @@ pub fn to_unit(bits: u32) -> f32 {
     (bits >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
-/// The sample index, nested-scrambled within its `bits` low bits (all
-/// indices of a render are below 2^bits): the shuffled index stays below
-/// 2^bits, so `sobol2` loops over `bits` bits, not 32 (Cycles 3.5 caps the
-/// index the same way), and aligned blocks still map to aligned blocks.
+/// A sample index as the draws take it: its `bits` low bits reversed
+/// (all indices of a render are below 2^bits). Computed once per sample.
 #[inline]
-fn shuffled(index: u32, bits: u32, seed: u32) -> u32 {
+pub fn reversed_index(index: u32, bits: u32) -> u32 {
+    if bits == 0 {
+        0
+    } else {
+        index.reverse_bits() >> (32 - bits)
+    }
+}
+
+/// The sample index, nested-scrambled within its `bits` low bits, from
+/// `reversed_index`: the shuffled index stays below 2^bits (Cycles 3.5 caps
+/// the index the same way), and aligned blocks still map to aligned blocks.
+/// Equal to `owen(index << (32 - bits), seed) >> (32 - bits)`.
+#[inline]
+fn shuffled(rev_index: u32, bits: u32, seed: u32) -> u32 {
     if bits == 0 {
         return 0;
     }
-    owen(index << (32 - bits), seed) >> (32 - bits)
+    scramble_reversed(rev_index, seed).reverse_bits() >> (32 - bits)
 }
 
-/// Draw `index` (< 2^`bits`) of the 2D sequence of dimension `dim` of a pixel.
+/// Draw `index` (< 2^`bits`, given as `reversed_index(index, bits)`) of the
+/// 2D sequence of dimension `dim` of a pixel. Each coordinate is
+/// `owen(sobol, seed)`; the sobol point's own reversal cancels the scramble's
+/// first one, so a draw costs three bit reversals.
 #[inline]
-pub fn sample_2d(pixel_seed: u64, dim: u64, index: u32, bits: u32) -> (f32, f32) {
+pub fn sample_2d(pixel_seed: u64, dim: u64, rev_index: u32, bits: u32) -> (f32, f32) {
     let s = seeds_of(pixel_seed, dim);
-    let (x, y) = sobol2(shuffled(index, bits, s[0]));
-    (to_unit(owen(x, s[1])), to_unit(owen(y, s[2])))
+    let j = shuffled(rev_index, bits, s[0]);
+    let x = scramble_reversed(j, s[1]).reverse_bits();
+    let y = scramble_reversed(sobol_y_reversed(j), s[2]).reverse_bits();
+    (to_unit(x), to_unit(y))
 }
 
 /// Draw `index` of the 1D sequence of dimension `dim` of a pixel (Sobol
-/// dimension 0: a scrambled van der Corput sequence).
+/// dimension 0: a scrambled van der Corput sequence), as `sample_2d`'s x.
 #[inline]
-pub fn sample_1d(pixel_seed: u64, dim: u64, index: u32, bits: u32) -> f32 {
+pub fn sample_1d(pixel_seed: u64, dim: u64, rev_index: u32, bits: u32) -> f32 {
     let s = seeds_of(pixel_seed, dim);
-    to_unit(owen(shuffled(index, bits, s[0]).reverse_bits(), s[1]))
+    to_unit(scramble_reversed(shuffled(rev_index, bits, s[0]), s[1]).reverse_bits())
 }
 
 #[cfg(test)]
@@ -120,6 +170,33 @@ mod tests {
                 !std::mem::replace(&mut seen[cell], true)
             })
         })
+    }
+
+    /// The draws as the model states them, without the reversal shortcuts.
+    fn sample_2d_by_definition(pixel_seed: u64, dim: u64, index: u32, bits: u32) -> (f32, f32) {
+        let s = seeds_of(pixel_seed, dim);
+        let j = if bits == 0 { 0 } else { owen(index << (32 - bits), s[0]) >> (32 - bits) };
+        let mut y = 0;
+        for k in 0..32 {
+            if j >> k & 1 != 0 {
+                y ^= DIRECTIONS[k];
+            }
+        }
+        (to_unit(owen(j.reverse_bits(), s[1])), to_unit(owen(y, s[2])))
+    }
+
+    #[test]
+    fn shortcuts_give_the_defined_draws() {
+        for (bits, n) in [(0u32, 1u32), (1, 2), (4, 16), (8, 256), (10, 1024), (20, 1 << 12), (32, 1 << 12)] {
+            for dim in [0u64, 5, 1 << 40] {
+                for i in 0..n {
+                    let index = if bits == 32 { i.wrapping_mul(0x9E37_79B9) } else if bits == 20 { i * 255 } else { i };
+                    let r = reversed_index(index, bits);
+                    assert_eq!(sample_2d(77, dim, r, bits), sample_2d_by_definition(77, dim, index, bits), "bits {bits} index {index}");
+                    assert_eq!(sample_1d(77, dim, r, bits), sample_2d_by_definition(77, dim, index, bits).0, "1D bits {bits} index {index}");
+                }
+            }
+        }
     }
 
     #[test]
@@ -153,14 +230,15 @@ mod tests {
         for pixel in 0..64u64 {
             let seed = crate::rng::mix64(pixel);
             for dim in [0u64, 1, 17, 1000, 1 << 48] {
-                let pts: Vec<(f32, f32)> = (0..1024).map(|i| sample_2d(seed, dim, i, 10)).collect();
+                let pts: Vec<(f32, f32)> = (0..1024).map(|i| sample_2d(seed, dim, reversed_index(i, 10), 10)).collect();
                 for m in 1..=8u32 {
                     for block in pts.chunks(1 << m).take(4) {
                         assert!(is_net(block, m), "pixel {pixel} dim {dim} m {m}");
                     }
                 }
                 // 1D: every aligned block of 2^m is stratified in 2^m intervals.
-                let xs: Vec<f32> = (0..256).map(|i| sample_1d(seed, dim, i, 8 + (pixel % 3) as u32)).collect();
+                let bits = 8 + (pixel % 3) as u32;
+                let xs: Vec<f32> = (0..256).map(|i| sample_1d(seed, dim, reversed_index(i, bits), bits)).collect();
                 for m in 1..=8u32 {
                     for block in xs.chunks(1 << m) {
                         let mut seen = vec![false; 1 << m];
