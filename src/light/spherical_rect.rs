@@ -13,17 +13,25 @@
 //! caller samples by area — the same rule in `sample` and `pdf`, so MIS
 //! stays consistent.
 
-use glam::{DVec3, Vec3};
-use std::f64::consts::PI;
+use glam::Vec3;
 
 /// Below this solid angle (sr) the caller samples by area instead.
 pub const MIN_SOLID_ANGLE: f32 = 1e-4;
 
-/// A rectangle as seen from one point, ready to sample. `new` works in f64:
-/// Ω is a sum of four angles minus 2π, which in f32 loses ~1e-3 of a small
-/// Ω (a grazing view of the Cornell light), and 1/Ω is the pdf. `sample`
-/// works in f32 but for the angle φ (profiled: in f64 the two were a
-/// quarter of a CBbunny render).
+/// A rectangle as seen from one point, ready to sample.
+///
+/// In the rectangle's frame (x, y along its edges, z its normal turned so
+/// the rectangle lies at z = z0 < 0 below the point) the corners are
+/// (x_i, y_j, z0). Each corner contributes the angle
+/// A(x, y) = atan(x·y / (|z0|·√(x² + y² + z0²))), and
+/// Ω = A(x1,y1) + A(x0,y0) − A(x1,y0) − A(x0,y1) — Ureña et al.'s
+/// Σγ − 2π with γ = π/2 ∓ A, without the cancellation against 2π. The four
+/// angles are added as one complex product (one atan2, in f64: Ω is a
+/// difference of angles, and a far or grazing rectangle's Ω is small against
+/// them); the sampler's
+/// angle φ = u·Ω + 2π − γ2 − γ3 becomes π + t0 + u·Ω with t0 = A(x0,y1) −
+/// A(x0,y0), and only cos t0 and sin t0 (algebraic) are kept, so a sample
+/// costs one sin/cos of u·Ω, which is exact however small Ω is.
 pub struct SphericalRect {
     o: Vec3,
     x: Vec3,
@@ -36,8 +44,8 @@ pub struct SphericalRect {
     z0: f32,
     b0: f32,
     b1: f32,
-    /// 2π − γ2 − γ3, in f64: φ = u·Ω + k must resolve a small Ω.
-    k: f64,
+    cos_t0: f32,
+    sin_t0: f32,
     /// The solid angle.
     pub omega: f32,
 }
@@ -47,7 +55,6 @@ impl SphericalRect {
     /// `None` when `o` lies in its plane or the solid angle is below
     /// `MIN_SOLID_ANGLE`. `ex` and `ey` must be orthogonal.
     pub fn new(o: Vec3, corner: Vec3, ex: Vec3, ey: Vec3) -> Option<SphericalRect> {
-        let (o, corner, ex, ey) = (o.as_dvec3(), corner.as_dvec3(), ex.as_dvec3(), ey.as_dvec3());
         let (a, b) = (ex.length(), ey.length());
         let x = ex / a;
         let y = ey / b;
@@ -63,48 +70,23 @@ impl SphericalRect {
         }
         let (x0, y0) = (d.dot(x), d.dot(y));
         let (x1, y1) = (x0 + a, y0 + b);
-        // Corner directions' edge-plane normals, in the local frame.
-        let v00 = DVec3::new(x0, y0, z0);
-        let v01 = DVec3::new(x0, y1, z0);
-        let v10 = DVec3::new(x1, y0, z0);
-        let v11 = DVec3::new(x1, y1, z0);
-        let n0 = v00.cross(v10).normalize();
-        let n1 = v10.cross(v11).normalize();
-        let n2 = v11.cross(v01).normalize();
-        let n3 = v01.cross(v00).normalize();
-        let angle = |a: DVec3, b: DVec3| (-a.dot(b)).clamp(-1.0, 1.0).acos();
-        let g0 = angle(n0, n1);
-        let g1 = angle(n1, n2);
-        let g2 = angle(n2, n3);
-        let g3 = angle(n3, n0);
-        let omega = g0 + g1 + g2 + g3 - 2.0 * PI;
-        if !(omega >= MIN_SOLID_ANGLE as f64) || !n0.is_finite() || !n1.is_finite() || !n2.is_finite() || !n3.is_finite() {
+        let (omega, cos_t0, sin_t0) = angles(x0 as f64, x1 as f64, y0 as f64, y1 as f64, z0 as f64);
+        let z2 = z0 * z0;
+        let (ly0, ly1) = ((z2 + y0 * y0).sqrt(), (z2 + y1 * y1).sqrt());
+        if !(omega >= MIN_SOLID_ANGLE) || !omega.is_finite() || !(ly0 > 0.0 && ly1 > 0.0) {
             return None;
         }
-        let f = |v: f64| v as f32;
-        Some(SphericalRect {
-            o: o.as_vec3(),
-            x: x.as_vec3(),
-            y: y.as_vec3(),
-            z: z.as_vec3(),
-            x0: f(x0),
-            x1: f(x1),
-            y0: f(y0),
-            y1: f(y1),
-            z0: f(z0),
-            b0: f(n0.z),
-            b1: f(n2.z),
-            k: 2.0 * PI - g2 - g3,
-            omega: f(omega),
-        })
+        Some(SphericalRect { o, x, y, z, x0, x1, y0, y1, z0, b0: -y0 / ly0, b1: y1 / ly1, cos_t0, sin_t0, omega })
     }
 
     /// The point for (u, v): uniform in solid angle as (u, v) is uniform.
     pub fn sample(&self, (u, v): (f32, f32)) -> Vec3 {
-        // The direction's x: the sub-rectangle [x0, xu] subtends u·Ω.
-        let phi = (u as f64 * self.omega as f64 + self.k) as f32;
-        let (sin_phi, cos_phi) = phi.sin_cos();
-        let f = (cos_phi * self.b0 - self.b1) / sin_phi;
+        // The direction's x: the sub-rectangle [x0, xu] subtends u·Ω. With
+        // t = t0 + u·Ω, cot-like f = (cos t·b0 + b1) / sin t.
+        let (sin_s, cos_s) = (u * self.omega).sin_cos();
+        let cos_t = self.cos_t0 * cos_s - self.sin_t0 * sin_s;
+        let sin_t = self.sin_t0 * cos_s + self.cos_t0 * sin_s;
+        let f = (cos_t * self.b0 + self.b1) / sin_t;
         let cu = (f.signum() / (f * f + self.b0 * self.b0).sqrt()).clamp(-1.0, 1.0);
         let xu = if cu.abs() < 1.0 {
             (-cu * self.z0 / (1.0 - cu * cu).sqrt()).clamp(self.x0, self.x1)
@@ -124,6 +106,26 @@ impl SphericalRect {
     }
 }
 
+/// Ω and (cos t0, sin t0) of the corners (x_i, y_j, z0). Corner (x, y) is
+/// the complex number q + i·p = |z0|·R + i·x·y (R the corner's distance),
+/// whose argument is A(x, y).
+fn angles(x0: f64, x1: f64, y0: f64, y1: f64, z0: f64) -> (f32, f32, f32) {
+    let (az, z2) = (z0.abs(), z0 * z0);
+    let corner = |x: f64, y: f64| (az * (x * x + y * y + z2).sqrt(), x * y);
+    let mul = |(a, b): (f64, f64), (p, q): (f64, f64)| (a * p - b * q, a * q + b * p);
+    let conj = |(a, b): (f64, f64)| (a, -b);
+    let (c00, c01, c10, c11) = (corner(x0, y0), corner(x0, y1), corner(x1, y0), corner(x1, y1));
+    let (re, im) = mul(mul(c11, c00), conj(mul(c10, c01)));
+    let mut omega = im.atan2(re);
+    if omega < 0.0 {
+        omega += 2.0 * std::f64::consts::PI; // Ω is in (0, 2π)
+    }
+    // t0 = A(x0,y1) − A(x0,y0): the argument of c01 · conj(c00).
+    let (re, im) = mul(c01, conj(c00));
+    let h = (re * re + im * im).sqrt();
+    (omega as f32, (re / h) as f32, (im / h) as f32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -135,10 +137,11 @@ mod tests {
     fn omega_exact(o: Vec3, corner: Vec3, ex: Vec3, ey: Vec3) -> f64 {
         // Solid angle of the triangle (o; a, b, c) by Van Oosterom–Strackee.
         let tri = |a: Vec3, b: Vec3, c: Vec3| -> f64 {
-            let (a, b, c) = (a - o, b - o, c - o);
-            let (la, lb, lc) = (a.length() as f64, b.length() as f64, c.length() as f64);
-            let num = a.dot(b.cross(c)) as f64;
-            let den = la * lb * lc + a.dot(b) as f64 * lc + a.dot(c) as f64 * lb + b.dot(c) as f64 * la;
+            let o = o.as_dvec3();
+            let (a, b, c) = (a.as_dvec3() - o, b.as_dvec3() - o, c.as_dvec3() - o);
+            let (la, lb, lc) = (a.length(), b.length(), c.length());
+            let num = a.dot(b.cross(c));
+            let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
             2.0 * num.atan2(den).abs()
         };
         tri(corner, corner + ex, corner + ex + ey) + tri(corner, corner + ex + ey, corner + ey)
@@ -153,6 +156,10 @@ mod tests {
             (Vec3::new(0.01, 0.02, 0.03), Vec3::new(-1.0, 1.0, -1.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 2.0)),
             // A tilted rectangle (edges not along axes).
             (Vec3::new(0.2, -0.7, 0.1), Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.6, 0.0, 0.6), Vec3::new(0.0, 0.8, 0.0).cross(Vec3::new(0.6, 0.0, 0.6)).normalize() * 0.4),
+            // Far (Ω ~ 1e-3 sr) and grazing (just above the plane, beside it):
+            // Ω is a small difference of corner angles there.
+            (Vec3::new(0.3, -20.0, 0.2), Vec3::ZERO, Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.5)),
+            (Vec3::new(2.5, -0.02, 0.2), Vec3::ZERO, Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.5)),
         ];
         for (o, corner, ex, ey) in cases {
             let r = SphericalRect::new(o, corner, ex, ey).unwrap();
@@ -181,6 +188,24 @@ mod tests {
             }
             // χ² with 15 degrees of freedom: p = 1e-4 at 42.3.
             assert!(chi2 < 42.3, "χ² {chi2:.1} for o = {o}");
+        }
+    }
+
+    #[test]
+    fn small_solid_angles_are_precise() {
+        // Far, off-axis and grazing views down to just above MIN_SOLID_ANGLE:
+        // Ω is a small difference of corner angles there, 1/Ω the pdf.
+        for (o, corner) in [
+            (Vec3::new(0.3, -40.0, 0.2), Vec3::ZERO),
+            (Vec3::new(20.0, -15.0, -9.0), Vec3::ZERO),
+            (Vec3::new(6.0, -0.05, 0.25), Vec3::ZERO),
+            (Vec3::new(-12.0, -6.0, 15.0), Vec3::ZERO),
+        ] {
+            let (ex, ey) = (Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.5));
+            let exact = omega_exact(o, corner, ex, ey);
+            assert!((1.5e-4..2e-3).contains(&exact), "Ω {exact} from {o}");
+            let r = SphericalRect::new(o, corner, ex, ey).unwrap();
+            assert!((r.omega as f64 - exact).abs() < 1e-6 * exact, "Ω {} vs {exact} from {o}", r.omega);
         }
     }
 
