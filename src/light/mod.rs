@@ -72,6 +72,9 @@ pub struct LightSample {
     /// Solid-angle pdf of `wi`; 1 for delta lights.
     pub pdf: f32,
     pub target: Target,
+    /// Drawn uniformly over the whole solid angle the light subtends from
+    /// the shading point (`Light::covers`).
+    pub covers: bool,
 }
 
 impl Light {
@@ -128,6 +131,20 @@ impl Light {
         }
     }
 
+    /// Whether `sample` from `p` draws directions uniformly over the whole
+    /// solid angle this emitter subtends (a rectangle by solid angle, a
+    /// sphere by its cone) — the same choice `sample` makes. For a diffuse
+    /// receiver such samples are already the BSDF's shape but for the
+    /// cosine, so light sampling alone estimates that light (see
+    /// `PathTracer::alone`).
+    pub fn covers(&self, p: Vec3) -> bool {
+        match self {
+            Light::Mesh { rect: Some(r), .. } => r.from(p).is_some(),
+            Light::Sphere { center, radius, .. } => sphere_cone::SphereCone::new(p, *center, *radius).is_some(),
+            _ => false,
+        }
+    }
+
     /// Radiance this light sends along `-dir` to a ray escaping along `dir`
     /// (0 for lights that are not at infinity).
     pub fn escaped(&self, dir: Vec3) -> Vec3 {
@@ -171,15 +188,15 @@ impl Light {
                     let wi = d / dist;
                     let near = offset_ray_origin(*position, -wi, position.abs().max_element());
                     let target = if (*position - near).length() < dist / 8192.0 { *position - wi * (dist / 8192.0) } else { near };
-                    LightSample { wi, value: *intensity / r2, pdf: 1.0, target: Target::Point(target) }
+                    LightSample { wi, value: *intensity / r2, pdf: 1.0, target: Target::Point(target), covers: false }
                 })
             }
-            Light::Directional { to_light, irradiance } => Some(LightSample { wi: *to_light, value: *irradiance, pdf: 1.0, target: Target::Infinite }),
+            Light::Directional { to_light, irradiance } => Some(LightSample { wi: *to_light, value: *irradiance, pdf: 1.0, target: Target::Infinite, covers: false }),
             Light::Hemisphere { radiance } => {
                 // Uniform over the upper hemisphere: local z maps to world +y.
                 let l = uniform_hemisphere(u.0, u.1);
                 let wi = Vec3::new(l.x, l.z, -l.y);
-                Some(LightSample { wi, value: *radiance, pdf: UNIFORM_HEMISPHERE_PDF, target: Target::Infinite })
+                Some(LightSample { wi, value: *radiance, pdf: UNIFORM_HEMISPHERE_PDF, target: Target::Infinite, covers: false })
             }
             Light::Rect { corner, ex, ey, normal, radiance } => {
                 if let Some(sr) = RectEmitter::new(*corner, *ex, *ey, *normal).and_then(|r| r.from(p)) {
@@ -214,7 +231,7 @@ impl Light {
             }
             Light::Environment(e) => {
                 let (wi, value, pdf) = e.sample(u)?;
-                Some(LightSample { wi, value, pdf, target: Target::Infinite })
+                Some(LightSample { wi, value, pdf, target: Target::Infinite, covers: false })
             }
         }
     }
@@ -227,7 +244,7 @@ fn solid_angle_sample(p: Vec3, q: Vec3, n: Vec3, mag: f32, radiance: Vec3, pdf: 
     if !(-n.dot(wi) > 0.0) || !(pdf > 0.0 && pdf.is_finite()) {
         return None;
     }
-    Some(LightSample { wi, value: radiance, pdf, target: Target::Point(offset_ray_origin(q, n, mag)) })
+    Some(LightSample { wi, value: radiance, pdf, target: Target::Point(offset_ray_origin(q, n, mag)), covers: true })
 }
 
 /// Convert an area-measure sample at `q` (normal `n`, one-sided) into a
@@ -245,7 +262,7 @@ fn area_sample(p: Vec3, q: Vec3, n: Vec3, mag: f32, radiance: Vec3, pdf_area: f3
     }
     // The shadow ray stops just short of the emitter: its end is pushed off
     // the surface, towards the receiver, by the same ulp offset as origins.
-    Some(LightSample { wi, value: radiance, pdf: pdf_area * dist2 / cos_l, target: Target::Point(offset_ray_origin(q, n, mag)) })
+    Some(LightSample { wi, value: radiance, pdf: pdf_area * dist2 / cos_l, target: Target::Point(offset_ray_origin(q, n, mag)), covers: false })
 }
 
 /// Radiance leaving the surface at `it` towards `wo` (unit, pointing away).

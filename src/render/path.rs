@@ -90,16 +90,30 @@ impl PathTracer<'_> {
         }
         match self.lights.of_geometry[hit.geom_id as usize] {
             Some(k) => {
-                let pl = self.lights.lights[k].pdf_hit(v.it.p, hit.p, hit.ng);
+                let light = &self.lights.lights[k];
+                if c.alone && light.covers(v.it.p) {
+                    return 0.0; // estimated by its light samples alone
+                }
+                let pl = light.pdf_hit(v.it.p, hit.p, hit.ng);
                 power_heuristic(c.pdf, self.light_samples as f32 * pl)
             }
             None => 1.0,
         }
     }
 
-    /// Whether the hemisphere light is sampled by the lune (`light::lune`) at
-    /// a vertex with this BSDF: diffuse, and not CS184's `-H` estimator.
-    pub(super) fn sky_by_lune(&self, bsdf: &Bsdf) -> bool {
+    /// Whether lights are sampled *alone* at a vertex with this BSDF:
+    /// diffuse, and not CS184's `-H` estimator. There, a light whose samples
+    /// cover its whole solid angle uniformly — the hemisphere light by the
+    /// lune (`light::lune`), a rectangle by solid angle, a sphere by its
+    /// cone (`Light::covers`) — is estimated by its light samples with weight
+    /// 1, and the vertex's BSDF sample adds nothing where it finds it: the
+    /// light sample's value varies only with the receiver's cosine and
+    /// visibility, where MIS would mix in a cosine-sampled estimate that finds
+    /// the light by chance. At the path's last vertex the BSDF sample is then
+    /// not traced at all when every light a ray can find is covered (at `-m 1`
+    /// a third of the rays). Measured on CBspheres_lambertian at 256x192:
+    /// see the README's light-transport section.
+    pub(super) fn alone(&self, bsdf: &Bsdf) -> bool {
         !self.hemisphere && matches!(bsdf, Bsdf::Diffuse(_))
     }
 
@@ -112,7 +126,7 @@ impl PathTracer<'_> {
             .iter()
             .map(|l| {
                 let le = l.escaped(c.wi);
-                if c.sky_by_lune && matches!(l, crate::light::Light::Hemisphere { .. }) {
+                if c.alone && matches!(l, crate::light::Light::Hemisphere { .. }) {
                     Vec3::ZERO
                 } else if le == Vec3::ZERO || c.delta {
                     le
@@ -125,13 +139,15 @@ impl PathTracer<'_> {
 
     /// Direct light reflected at `v` towards the previous vertex: the
     /// wavefront's terms (`direct_terms`), their rays traced one by one.
-    fn direct(&self, v: &Vertex, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
+    /// Also whether the vertex's BSDF sample can still find light (see
+    /// `direct_terms`).
+    fn direct(&self, v: &Vertex, sampler: &mut Sampler, rays: &mut u64) -> (Vec3, bool) {
         let (mut terms, mut shadow, mut closest) = (Vec::new(), Vec::new(), Vec::new());
-        self.direct_terms(v, sampler, &mut terms, &mut shadow, &mut closest);
+        let bsdf_finds_light = self.direct_terms(v, sampler, &mut terms, &mut shadow, &mut closest);
         *rays += (shadow.len() + closest.len()) as u64;
         let occluded: Vec<bool> = shadow.iter().map(|r| self.accel.occluded(r)).collect();
         let found: Vec<Option<Hit>> = closest.iter().map(|r| self.accel.intersect(r)).collect();
-        self.replay(&terms, &occluded, &closest, &found)
+        (self.replay(&terms, &occluded, &closest, &found), bsdf_finds_light)
     }
 }
 
@@ -162,12 +178,15 @@ impl Integrator for PathTracer<'_> {
         loop {
             let count = counts(bounce);
             sampler.set_bounce(bounce);
+            let mut seeks_light = false;
             if count {
-                l += beta * self.direct(&v, sampler, rays);
+                let (d, finds) = self.direct(&v, sampler, rays);
+                l += beta * d;
+                seeks_light = finds;
             }
             // With MIS the last vertex still needs its BSDF sample: the light
             // it finds is part of this bounce's direct light.
-            let Some(c) = self.continuation(&v, bounce, count, beta, radiance_scale, sampler) else { break };
+            let Some(c) = self.continuation(&v, bounce, seeks_light, beta, radiance_scale, sampler) else { break };
             let last = bounce == m;
             let ray = v.it.spawn_ray(c.wi);
             let gather = count && (!self.hemisphere || c.delta);
@@ -206,9 +225,9 @@ pub(super) struct Continuation {
     pub beta: Vec3,
     /// Sampled from a delta lobe.
     pub delta: bool,
-    /// The vertex sampled the hemisphere light with the lune sampler
-    /// (`sky_by_lune`), so this ray's view of it must add nothing.
-    pub sky_by_lune: bool,
+    /// The vertex samples lights alone where their samples cover them
+    /// (`PathTracer::alone`), so this ray's view of those must add nothing.
+    pub alone: bool,
     /// The product of the path's radiance scalings (η²) so far, which
     /// Russian roulette divides out of `beta`.
     pub radiance_scale: f32,

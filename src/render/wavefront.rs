@@ -109,11 +109,9 @@ impl PathTracer<'_> {
                 sampler.set_bounce(p.bounce);
                 let first = terms.len();
                 p.counted = counts(p.bounce);
-                if p.counted {
-                    self.direct_terms(v, sampler, &mut terms, &mut shadow, &mut closest);
-                }
+                let seeks_light = p.counted && self.direct_terms(v, sampler, &mut terms, &mut shadow, &mut closest);
                 p.terms = first..terms.len();
-                p.next = self.continuation(v, p.bounce, p.counted, p.beta, p.radiance_scale, sampler).map(|c| {
+                p.next = self.continuation(v, p.bounce, seeks_light, p.beta, p.radiance_scale, sampler).map(|c| {
                     closest.push(v.it.spawn_ray(c.wi));
                     (closest.len() - 1, c)
                 });
@@ -166,15 +164,18 @@ impl PathTracer<'_> {
     /// The direct light at `v`, drawn but not yet traced: the terms in the
     /// order they are summed, shadow rays appended to `shadow`, `-H`
     /// hemisphere rays to `closest`. Light sampling weighs each sample
-    /// against the BSDF sample by the power heuristic (delta lights and
-    /// lights no ray can hit have weight 1: only light sampling finds them);
-    /// `-H` adds CS184's uniform hemisphere samples for the lights a ray
-    /// can hit.
-    pub(super) fn direct_terms(&self, v: &Vertex, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) {
+    /// against the BSDF sample by the power heuristic (delta lights, lights
+    /// no ray can hit and lights sampled alone (`PathTracer::alone`) have
+    /// weight 1: only light sampling counts them); `-H` adds CS184's uniform
+    /// hemisphere samples for the lights a ray can hit. Returns whether the
+    /// vertex's BSDF sample can still add light (some light a ray can hit is
+    /// not sampled alone here, or the BSDF is a delta).
+    pub(super) fn direct_terms(&self, v: &Vertex, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) -> bool {
         // Delta BSDFs see lights only through their sampled ray.
-        let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return };
+        let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return true };
         let explicit = self.lights.lights.iter().enumerate().filter(|(_, l)| !self.hemisphere || !l.is_visible());
-        let sky_by_lune = self.sky_by_lune(&bsdf);
+        let alone = self.alone(&bsdf);
+        let mut bsdf_finds_light = self.hemisphere;
         for (li, light) in explicit {
             let n = if light.is_delta() { 1 } else { self.light_samples };
             let mis = !self.hemisphere && light.is_visible();
@@ -185,13 +186,16 @@ impl PathTracer<'_> {
                 let u_sel = if light.uses_selection() { sampler.slot_1d(dim::LIGHT_CHOICE, k) } else { 0.0 };
                 // The sky at a diffuse vertex: the lune sampler alone (its
                 // weight is constant; BSDF rays escaping there add nothing).
-                let lune = sky_by_lune && matches!(light, Light::Hemisphere { .. });
+                let lune = alone && matches!(light, Light::Hemisphere { .. });
                 let s = match light {
                     Light::Hemisphere { radiance } if lune => {
-                        lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite })
+                        lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true })
                     }
                     _ => light.sample(self.scene, v.it.p, u, u_sel),
                 };
+                // Sampled alone: the BSDF sample need not look for it.
+                let by_itself = alone && s.is_some_and(|s| s.covers);
+                bsdf_finds_light |= light.is_visible() && !by_itself;
                 let Some(s) = s else { continue };
                 let cos = s.wi.dot(v.ns);
                 if cos <= 0.0 || s.wi.dot(v.ng) <= 0.0 || s.pdf <= 0.0 {
@@ -206,13 +210,13 @@ impl PathTracer<'_> {
                     Target::Point(q) => v.it.spawn_ray_to(q),
                     Target::Infinite => v.it.spawn_ray(s.wi),
                 });
-                let w = if mis && !lune { super::path::power_heuristic(n as f32 * s.pdf, bsdf.pdf(v.wo, wi)) } else { 1.0 };
+                let w = if mis && !by_itself { super::path::power_heuristic(n as f32 * s.pdf, bsdf.pdf(v.wo, wi)) } else { 1.0 };
                 terms.push(Term::Shadow { ray: shadow.len() - 1, value: f * s.value * cos / s.pdf * w });
             }
             terms.push(Term::Group { n });
         }
         if !self.hemisphere {
-            return;
+            return bsdf_finds_light;
         }
         let visible = self.lights.lights.iter().filter(|l| l.is_visible()).count() as u32;
         let n = visible.max(1) * self.light_samples;
@@ -227,6 +231,7 @@ impl PathTracer<'_> {
             terms.push(Term::Hemisphere { ray: closest.len() - 1, f: bsdf.eval(v.wo, local), wi, cos: wi.dot(v.ns) });
         }
         terms.push(Term::Group { n });
+        bsdf_finds_light
     }
 
     /// The direct light of recorded `terms`, summed as `PathTracer::direct` sums.
@@ -261,12 +266,13 @@ impl PathTracer<'_> {
     /// `RR_WEIGHT_FLOOR`).
     /// The last vertex samples its BSDF only to find emitters: with MIS
     /// (its share of the direct light) or behind a delta BSDF (the only way
-    /// to see light there), and only when its bounce counts.
+    /// to see light there), and only when `seeks_light`: its bounce counts
+    /// and `direct_terms` left it light to find.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, count: bool, beta: Vec3, radiance_scale: f32, sampler: &mut Sampler) -> Option<Continuation> {
+    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, seeks_light: bool, beta: Vec3, radiance_scale: f32, sampler: &mut Sampler) -> Option<Continuation> {
         let last = bounce == self.max_depth;
         let bsdf = v.bsdf?;
-        if last && (!count || (self.hemisphere && !bsdf.is_delta())) {
+        if last && (!seeks_light || (self.hemisphere && !bsdf.is_delta())) {
             return None;
         }
         // Only the draws this BSDF uses (each has its own slot anyway).
@@ -297,6 +303,6 @@ impl PathTracer<'_> {
             }
             beta_next /= q;
         }
-        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale, sky_by_lune: self.sky_by_lune(&bsdf) })
+        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale, alone: self.alone(&bsdf) })
     }
 }
