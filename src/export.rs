@@ -90,8 +90,8 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
         light_list.push(match l {
             Light::Point { position, intensity } => json!({"type": "point", "position": v3(*position), "intensity": v3(*intensity)}),
             Light::Directional { to_light, irradiance } => json!({"type": "directional", "to_light": v3(*to_light), "irradiance": v3(*irradiance)}),
-            Light::Hemisphere { radiance } => json!({"type": "hemisphere", "up": [0.0, 1.0, 0.0], "radiance": v3(*radiance)}),
-            Light::Rect { corner, ex, ey, normal, radiance } => {
+            Light::Hemisphere { radiance, .. } => json!({"type": "hemisphere", "up": [0.0, 1.0, 0.0], "radiance": v3(*radiance)}),
+            Light::Rect { corner, ex, ey, normal, radiance, .. } => {
                 json!({"type": "rect", "corner": v3(*corner), "ex": v3(*ex), "ey": v3(*ey), "normal": v3(*normal), "radiance": v3(*radiance), "visible": false})
             }
             Light::Environment(e) => {

@@ -212,9 +212,13 @@ struct Stats {
 
 #[allow(clippy::too_many_arguments)]
 fn render_stats(scene: &Scene, camera: &Camera, backend: BackendKind, m: u32, accumulate: bool, hemisphere: bool, rr: bool, spp: u32, seed: u64, w: u32, h: u32) -> Stats {
+    render_stats_with(scene, &Lights::from_scene(scene).unwrap(), camera, backend, m, accumulate, hemisphere, rr, spp, seed, w, h)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_stats_with(scene: &Scene, lights: &Lights, camera: &Camera, backend: BackendKind, m: u32, accumulate: bool, hemisphere: bool, rr: bool, spp: u32, seed: u64, w: u32, h: u32) -> Stats {
     let accel = common::build(backend, &scene.shapes);
-    let lights = Lights::from_scene(scene).unwrap();
-    let integ = PathTracer { scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate, hemisphere, light_samples: 1, russian_roulette: rr };
+    let integ = PathTracer { scene, accel: accel.as_ref(), lights, max_depth: m, accumulate, hemisphere, light_samples: 1, russian_roulette: rr };
     let settings = RenderSettings::new(w, h, spp, seed);
     let out = render::render(camera, &integ, &settings);
     let lum = |c: Vec3| (c.x as f64 + c.y as f64 + c.z as f64) / 3.0;
@@ -367,6 +371,40 @@ fn hemisphere_and_light_sampling_agree() {
         let hemi = render_stats(&scene, &cam, BackendKind::Native, m, true, true, true, 4096, 2, w, h);
         assert!(light.all_finite && hemi.all_finite);
         assert_agree(&light, &hemi, h, &format!("-m {m}: light vs hemisphere sampling"), 0.01);
+    }
+}
+
+#[test]
+fn cs184_light_and_sky_sampling_agree_with_ours() {
+    // Our samplers (solid-angle rectangles, sphere cones, the lune sky, all
+    // sampled alone at diffuse vertices) against CS184's (area, uniform sky
+    // with MIS), which `--light-sampling area --sky-sampling uniform` select.
+    let (w, h) = (32, 24);
+    let (box_scene, box_cam) = cornell(w, h);
+    let ground = TriangleMesh {
+        positions: vec![Vec3::new(-20.0, -1.0, 10.0), Vec3::new(20.0, -1.0, 10.0), Vec3::new(20.0, -1.0, -30.0), Vec3::new(-20.0, -1.0, -30.0)],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        normals: vec![],
+    };
+    let mut ground = ground;
+    ground.compute_normals();
+    let sky = LightDesc { name: "sky".into(), kind: LightKind::Ambient, radiance: Vec3::ONE, transform: glam::Mat4::IDENTITY };
+    let sky_scene = scene_of(
+        vec![
+            (Shape::Mesh(ground), diffuse("ground", 0.5, 0.0)),
+            (Shape::Mesh(cube_mesh(0.5, Vec3::new(-0.3, -0.5, -3.0), false)), diffuse("cube", 0.7, 0.0)),
+            (Shape::Sphere { center: Vec3::new(0.9, -0.6, -2.6), radius: 0.3 }, diffuse("lamp", 0.0, 4.0)),
+        ],
+        vec![sky],
+    );
+    let sky_cam = camera_at(&sky_scene, Vec3::new(0.0, 0.0, 0.0), w, h);
+    for (what, scene, cam, m) in [("Cornell box -m 1", &box_scene, &box_cam, 1), ("Cornell box -m 3", &box_scene, &box_cam, 3), ("sky, sphere lamp -m 2", &sky_scene, &sky_cam, 2)] {
+        let ours = Lights::from_scene(scene).unwrap();
+        let theirs = Lights::from_scene(scene).unwrap().with_sampling(true, true);
+        let a = render_stats_with(scene, &ours, cam, BackendKind::Native, m, true, false, true, 1024, 21, w, h);
+        let b = render_stats_with(scene, &theirs, cam, BackendKind::Native, m, true, false, true, 1024, 22, w, h);
+        assert!(a.all_finite && b.all_finite);
+        assert_agree(&a, &b, h, &format!("{what}: ours vs CS184's light sampling"), 0.01);
     }
 }
 

@@ -41,14 +41,18 @@ use std::f32::consts::PI;
 pub enum Light {
     Point { position: Vec3, intensity: Vec3 },
     Directional { to_light: Vec3, irradiance: Vec3 },
-    /// CS184's "ambient": uniform radiance over the upper (+y) hemisphere of directions.
-    Hemisphere { radiance: Vec3 },
-    /// A one-sided rectangle `corner + s*ex + t*ey`, s,t in [0,1], emitting towards `normal`.
-    Rect { corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3, radiance: Vec3 },
+    /// CS184's "ambient": uniform radiance over the upper (+y) hemisphere of
+    /// directions; `lune`: sampled by the lune at diffuse vertices.
+    Hemisphere { radiance: Vec3, lune: bool },
+    /// A one-sided rectangle `corner + s*ex + t*ey`, s,t in [0,1], emitting
+    /// towards `normal`; sampled by solid angle where it subtends enough
+    /// (`solid_angle`), else by area.
+    Rect { corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3, radiance: Vec3, solid_angle: bool },
     /// The triangles of an emissive mesh, sampled by area; or, when they
     /// form one rectangle (`rect`), by solid angle where it subtends enough.
     Mesh { geom_id: u32, cdf: Vec<f32>, area: f32, radiance: Vec3, rect: Option<RectEmitter> },
-    Sphere { center: Vec3, radius: f32, radiance: Vec3 },
+    /// An emissive sphere; sampled by its cone from outside (`cone`), else by area.
+    Sphere { center: Vec3, radius: f32, radiance: Vec3, cone: bool },
     /// A latitude-longitude environment map (`-e`).
     Environment(Arc<EnvMap>),
 }
@@ -91,13 +95,13 @@ impl Light {
         match self {
             Light::Point { position, intensity } => format!("point at {position} intensity {intensity}"),
             Light::Directional { to_light, irradiance } => format!("directional towards {to_light} irradiance {irradiance}"),
-            Light::Hemisphere { radiance } => format!("hemisphere (+y) radiance {radiance}"),
+            Light::Hemisphere { radiance, .. } => format!("hemisphere (+y) radiance {radiance}"),
             Light::Rect { corner, ex, ey, radiance, .. } => format!("rectangle at {corner} {}x{} radiance {radiance}", ex.length(), ey.length()),
             Light::Mesh { geom_id, area, radiance, rect, .. } => format!(
                 "emissive mesh {geom_id} area {area} radiance {radiance}{}",
                 if rect.is_some() { " (a rectangle: sampled by solid angle)" } else { "" }
             ),
-            Light::Sphere { center, radius, radiance } => format!("emissive sphere at {center} r {radius} radiance {radiance}"),
+            Light::Sphere { center, radius, radiance, .. } => format!("emissive sphere at {center} r {radius} radiance {radiance}"),
             Light::Environment(e) => format!("environment map {} ({}x{})", e.path, e.width, e.height),
         }
     }
@@ -111,7 +115,7 @@ impl Light {
                 return 1.0 / sr.omega;
             }
         }
-        if let Light::Sphere { center, radius, .. } = self {
+        if let Light::Sphere { center, radius, cone: true, .. } = self {
             if let Some(cone) = sphere_cone::SphereCone::new(p, *center, *radius) {
                 return cone.pdf();
             }
@@ -140,7 +144,7 @@ impl Light {
     pub fn covers(&self, p: Vec3) -> bool {
         match self {
             Light::Mesh { rect: Some(r), .. } => r.from(p).is_some(),
-            Light::Sphere { center, radius, .. } => sphere_cone::SphereCone::new(p, *center, *radius).is_some(),
+            Light::Sphere { center, radius, cone: true, .. } => sphere_cone::SphereCone::new(p, *center, *radius).is_some(),
             _ => false,
         }
     }
@@ -149,7 +153,7 @@ impl Light {
     /// (0 for lights that are not at infinity).
     pub fn escaped(&self, dir: Vec3) -> Vec3 {
         match self {
-            Light::Hemisphere { radiance } if dir.y > 0.0 => *radiance,
+            Light::Hemisphere { radiance, .. } if dir.y > 0.0 => *radiance,
             Light::Environment(e) => e.eval(dir),
             _ => Vec3::ZERO,
         }
@@ -192,14 +196,14 @@ impl Light {
                 })
             }
             Light::Directional { to_light, irradiance } => Some(LightSample { wi: *to_light, value: *irradiance, pdf: 1.0, target: Target::Infinite, covers: false }),
-            Light::Hemisphere { radiance } => {
+            Light::Hemisphere { radiance, .. } => {
                 // Uniform over the upper hemisphere: local z maps to world +y.
                 let l = uniform_hemisphere(u.0, u.1);
                 let wi = Vec3::new(l.x, l.z, -l.y);
                 Some(LightSample { wi, value: *radiance, pdf: UNIFORM_HEMISPHERE_PDF, target: Target::Infinite, covers: false })
             }
-            Light::Rect { corner, ex, ey, normal, radiance } => {
-                if let Some(sr) = RectEmitter::new(*corner, *ex, *ey, *normal).and_then(|r| r.from(p)) {
+            Light::Rect { corner, ex, ey, normal, radiance, solid_angle } => {
+                if let Some(sr) = RectEmitter::new(*corner, *ex, *ey, *normal).filter(|_| *solid_angle).and_then(|r| r.from(p)) {
                     return solid_angle_sample(p, sr.sample(u), *normal, magnitude(&[*corner, *corner + *ex + *ey]), *radiance, 1.0 / sr.omega);
                 }
                 let area = ex.cross(*ey).length();
@@ -218,9 +222,9 @@ impl Light {
                 let n = crate::geometry::face_normal(a, b, c);
                 area_sample(p, q, n, magnitude(&[a, b, c]), *radiance, 1.0 / area)
             }
-            Light::Sphere { center, radius, radiance } => {
+            Light::Sphere { center, radius, radiance, cone } => {
                 let mag = center.abs().max_element() + radius;
-                if let Some(cone) = sphere_cone::SphereCone::new(p, *center, *radius) {
+                if let Some(cone) = sphere_cone::SphereCone::new(p, *center, *radius).filter(|_| *cone) {
                     let (_, q) = cone.sample(u);
                     let n = (q - *center).normalize_or_zero();
                     return solid_angle_sample(p, q, n, mag, *radiance, cone.pdf());
@@ -316,7 +320,7 @@ impl Lights {
                 }
                 Shape::Sphere { center, radius } => {
                     out.of_geometry[g] = Some(out.lights.len());
-                    out.lights.push(Light::Sphere { center: *center, radius: *radius, radiance });
+                    out.lights.push(Light::Sphere { center: *center, radius: *radius, radiance, cone: true });
                 }
             }
         }
@@ -339,7 +343,7 @@ impl Lights {
                     }
                     out.lights.push(Light::Directional { to_light, irradiance: l.radiance });
                 }
-                LightKind::Ambient => out.lights.push(Light::Hemisphere { radiance: l.radiance }),
+                LightKind::Ambient => out.lights.push(Light::Hemisphere { radiance: l.radiance, lune: true }),
                 LightKind::Spot => crate::bail!("{}: spot light '{}' is not supported (CS184 leaves spot lights unimplemented)", scene.source, l.name),
                 LightKind::Area => {
                     // CS184: centre T(0,0,0), emitting along T(0,0,-1) - centre,
@@ -364,7 +368,7 @@ impl Lights {
                         ));
                     }
                     let corner = pos - 0.5 * dx - 0.5 * dy;
-                    out.lights.push(Light::Rect { corner, ex: dx, ey: dy, normal: dir, radiance: l.radiance });
+                    out.lights.push(Light::Rect { corner, ex: dx, ey: dy, normal: dir, radiance: l.radiance, solid_angle: true });
                 }
             }
         }
@@ -376,6 +380,23 @@ impl Lights {
             }
         }
         Ok(out)
+    }
+
+    /// The CS184 sampling of every light instead of ours, for A/B
+    /// measurements (`--light-sampling area`, `--sky-sampling uniform`):
+    /// rectangles and spheres by area (`area`), the hemisphere light
+    /// uniformly with MIS at every vertex (`uniform_sky`).
+    pub fn with_sampling(mut self, area: bool, uniform_sky: bool) -> Lights {
+        for l in &mut self.lights {
+            match l {
+                Light::Mesh { rect, .. } if area => *rect = None,
+                Light::Rect { solid_angle, .. } if area => *solid_angle = false,
+                Light::Sphere { cone, .. } if area => *cone = false,
+                Light::Hemisphere { lune, .. } if uniform_sky => *lune = false,
+                _ => {}
+            }
+        }
+        self
     }
 
     /// Radiance of the lights a ray escaping along `dir` sees.

@@ -126,7 +126,7 @@ impl PathTracer<'_> {
             .iter()
             .map(|l| {
                 let le = l.escaped(c.wi);
-                if c.alone && matches!(l, crate::light::Light::Hemisphere { .. }) {
+                if c.alone && matches!(l, crate::light::Light::Hemisphere { lune: true, .. }) {
                     Vec3::ZERO
                 } else if le == Vec3::ZERO || c.delta {
                     le

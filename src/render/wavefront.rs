@@ -186,9 +186,9 @@ impl PathTracer<'_> {
                 let u_sel = if light.uses_selection() { sampler.slot_1d(dim::LIGHT_CHOICE, k) } else { 0.0 };
                 // The sky at a diffuse vertex: the lune sampler alone (its
                 // weight is constant; BSDF rays escaping there add nothing).
-                let lune = alone && matches!(light, Light::Hemisphere { .. });
+                let lune = alone && matches!(light, Light::Hemisphere { lune: true, .. });
                 let s = match light {
-                    Light::Hemisphere { radiance } if lune => {
+                    Light::Hemisphere { radiance, .. } if lune => {
                         lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true })
                     }
                     _ => light.sample(self.scene, v.it.p, u, u_sel),

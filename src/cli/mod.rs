@@ -1,6 +1,11 @@
-//! The command line: CS184's flags plus ours, one-line errors, the summary line.
+//! The command line: CS184's flags plus ours (defined in `args`), one-line
+//! errors, the summary line.
 
-use crate::accel::{self, BackendKind};
+mod args;
+
+pub use args::{Cli, Command, IntegratorKind, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg};
+
+use crate::accel;
 use crate::camera::{Camera, DEFAULT_HEIGHT, DEFAULT_WIDTH};
 use crate::error::{Error, Result};
 use crate::image_io;
@@ -8,188 +13,10 @@ use crate::light::Lights;
 use crate::render::{self, aov, normals::NormalShading, path::PathTracer, Adaptive, Integrator, Region, RenderSettings};
 use crate::scene::Bsdf;
 use crate::scene::{builtin, Scene};
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Parser, ValueEnum};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
-
-#[derive(Parser, Debug)]
-#[command(
-    name = "pathtracer",
-    version,
-    about = "Physically based path tracer for CS184 .dae scenes (native BVH, Embree or brute-force traversal)",
-    args_conflicts_with_subcommands = true
-)]
-pub struct Cli {
-    #[command(subcommand)]
-    pub command: Option<Command>,
-    #[command(flatten)]
-    pub render: RenderArgs,
-}
-
-#[derive(Subcommand, Debug)]
-pub enum Command {
-    /// Time BVH builds and ray throughput per backend, and print a table.
-    Bench(crate::bench::BenchArgs),
-    /// Write the loaded scene (camera placed, lights merged) as scene.json + OBJ
-    /// meshes for the validation harness's reference-renderer exporters.
-    Export {
-        #[command(flatten)]
-        render: RenderArgs,
-        /// Output folder
-        #[arg(long, value_name = "DIR")]
-        out: PathBuf,
-    },
-    /// Combine the partials of a split render (--part I/N --partial FILE) into
-    /// exactly the images the one-machine render writes.
-    Merge {
-        /// The partials, one per part, in any order
-        #[arg(required = true, value_name = "PARTIAL")]
-        partials: Vec<PathBuf>,
-        /// Output PNG (also writes <FILE minus extension>_rate.png)
-        #[arg(short = 'f', value_name = "FILE", required = true)]
-        output: PathBuf,
-        /// Also write the linear radiance as OpenEXR
-        #[arg(long, value_name = "FILE")]
-        exr: Option<PathBuf>,
-        /// Also write the per-pixel variance of the mean as OpenEXR
-        #[arg(long, value_name = "FILE")]
-        variance_exr: Option<PathBuf>,
-    },
-    /// Error of OpenEXR images against a reference: relMSE and relative bias.
-    Compare {
-        /// The reference image (linear OpenEXR)
-        reference: PathBuf,
-        /// Images to compare with it
-        #[arg(required = true)]
-        images: Vec<PathBuf>,
-    },
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum IntegratorKind {
-    /// Light transport: direct lighting (-m 1) or global illumination (-m > 1).
-    Path,
-    /// Shading normal as colour, n*0.5+0.5 (CS184's normal_shading).
-    Normals,
-    /// Distance to the first hit along the camera ray (0 where it escapes).
-    Depth,
-    /// A flat colour per object (`pathtracer export` lists each object's colour).
-    ObjectId,
-}
-
-#[derive(Args, Debug)]
-pub struct RenderArgs {
-    /// Scene file: CS184 COLLADA (.dae), or a mesh as Wavefront OBJ (.obj) or
-    /// PLY (.ply, ASCII or binary). OBJ/PLY carry geometry only, so they get
-    /// fixed defaults: CS184's diffuse 0.5 on every mesh (OBJ materials are
-    /// not read), a hemisphere sky of radiance 1 over +y (bunny.dae's light),
-    /// CS184's camera placement looking along -z with no clipping planes.
-    /// Without a file, the built-in CBspheres_lambertian is rendered.
-    pub scene: Option<PathBuf>,
-    /// Render threads [default: all cores]
-    #[arg(short = 't', value_name = "N")]
-    pub threads: Option<usize>,
-    /// Camera rays per pixel (the maximum with -a) [default: 1]
-    #[arg(short = 's', value_name = "N")]
-    pub spp: Option<u32>,
-    /// Samples per area light [default: 1]
-    #[arg(short = 'l', value_name = "N")]
-    pub light_samples: Option<u32>,
-    /// Maximum ray depth [default: 1]
-    #[arg(short = 'm', value_name = "N")]
-    pub max_depth: Option<u32>,
-    /// 1: accumulate bounces 0..m; 0: output only bounce m [default: 1]
-    #[arg(short = 'o', value_name = "0|1")]
-    pub accumulate: Option<i64>,
-    /// Uniform hemisphere sampling for direct light instead of light sampling
-    #[arg(short = 'H')]
-    pub hemisphere: bool,
-    /// Adaptive sampling: check every BATCH samples, stop at relative tolerance TOL
-    #[arg(short = 'a', num_args = 2, value_names = ["BATCH", "TOL"], allow_negative_numbers = true)]
-    pub adaptive: Option<Vec<String>>,
-    /// Frame size in pixels [default: 800 600]; keeps CS184's pixel focal length
-    #[arg(short = 'r', num_args = 2, value_names = ["W", "H"], allow_negative_numbers = true)]
-    pub resolution: Option<Vec<String>>,
-    /// With -r: scale the 800x600 view to the new size instead of cropping it
-    #[arg(long, requires = "resolution")]
-    pub keep_fov: bool,
-    /// Output PNG (also writes <FILE minus extension>_rate.png) [default: ./<scene>.png]
-    #[arg(short = 'f', value_name = "FILE")]
-    pub output: Option<PathBuf>,
-    /// Load a CS184 camera settings file
-    #[arg(short = 'c', value_name = "FILE")]
-    pub camera: Option<PathBuf>,
-    /// Render only the cell at X,Y (from the bottom-left) of size DX x DY
-    #[arg(short = 'p', num_args = 4, value_names = ["X", "Y", "DX", "DY"], allow_negative_numbers = true)]
-    pub cell: Option<Vec<String>>,
-    /// Environment light: a latitude-longitude OpenEXR map (CS184's -e)
-    #[arg(short = 'e', value_name = "FILE.exr")]
-    pub environment: Option<PathBuf>,
-    /// Thin-lens radius in scene units; 0 is a pinhole [default: 0]
-    #[arg(short = 'b', value_name = "RADIUS", allow_negative_numbers = true)]
-    pub lens_radius: Option<String>,
-    /// Focal distance: the plane in focus, in scene units along the view axis [default: 4.7]
-    #[arg(short = 'd', value_name = "DIST", allow_negative_numbers = true)]
-    pub focal_distance: Option<String>,
-    /// Ray traversal backend
-    #[arg(long, value_enum, default_value_t = BackendKind::Native)]
-    pub backend: BackendKind,
-    /// What to compute per camera ray
-    #[arg(long, value_enum, default_value_t = IntegratorKind::Path)]
-    pub integrator: IntegratorKind,
-    /// Disable Russian roulette (paths then always run to -m bounces)
-    #[arg(long)]
-    pub no_rr: bool,
-    /// With -a: decide each pixel's sample count on pilot samples that are
-    /// then discarded (unbiased; CS184's rule decides on the samples it keeps)
-    #[arg(long, requires = "adaptive")]
-    pub adaptive_pilot: bool,
-    /// Seed of the per-pixel sample draws
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Where each sample's random numbers come from: Owen-scrambled Sobol
-    /// points (stratified) or independent uniform numbers
-    #[arg(long, value_enum, default_value_t = SamplerArg::Sobol)]
-    pub sampler: SamplerArg,
-    /// Also write the linear radiance as OpenEXR
-    #[arg(long, value_name = "FILE")]
-    pub exr: Option<PathBuf>,
-    /// Also write the per-pixel variance of the mean as OpenEXR
-    #[arg(long, value_name = "FILE")]
-    pub variance_exr: Option<PathBuf>,
-    /// Write the camera settings (CS184's six-line format) used for this render
-    #[arg(long, value_name = "FILE")]
-    pub write_camera: Option<PathBuf>,
-    /// Render only part I (from 0) of N of the work and write it to --partial
-    /// FILE instead of images; `pathtracer merge` makes the images from all N
-    #[arg(long, value_name = "I/N", requires = "partial", allow_hyphen_values = true)]
-    pub part: Option<String>,
-    /// The partial file --part writes
-    #[arg(long, value_name = "FILE", requires = "part")]
-    pub partial: Option<PathBuf>,
-    /// How --part divides the work: sample ranges of every pixel, or
-    /// interleaved tiles [default: samples; tiles with -a]
-    #[arg(long, value_enum, requires = "part")]
-    pub split: Option<SplitArg>,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SamplerArg {
-    /// Owen-scrambled, shuffled Sobol points, one sequence per draw (Burley 2020)
-    Sobol,
-    /// Independent uniform random numbers (CS184's kind; for A/B comparisons)
-    Independent,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SplitArg {
-    /// Sample indices [I*S/N, (I+1)*S/N) of every pixel
-    Samples,
-    /// Tiles k of the frame with k mod N = I (pixels are independent, so
-    /// adaptive sampling stays exact)
-    Tiles,
-}
 
 const DEMO_SPP: u32 = 16;
 const DEMO_DEPTH: u32 = 5;
@@ -351,7 +178,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let lights = match a.integrator {
         IntegratorKind::Path => {
             check_materials(&scene)?;
-            let l = Lights::with_environment(&scene, env)?;
+            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform);
             if l.lights.is_empty() {
                 // One line: the notes (a zero-radiance light dropped) go into it.
                 let why = if l.notes.is_empty() { String::new() } else { format!(" ({})", l.notes.join("; ")) };
@@ -568,6 +395,8 @@ fn partial_settings(
         kv("spp", s.spp.to_string()),
         kv("seed", s.seed.to_string()),
         kv("sampler", a.sampler.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
+        kv("light_sampling", a.light_sampling.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
+        kv("sky_sampling", a.sky_sampling.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("adaptive", adaptive),
         kv("integrator", a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("max_depth", a.max_depth.unwrap_or(1).to_string()),
