@@ -125,14 +125,20 @@ impl Camera {
     /// `(0,0)` at the bottom-left, with the clip range as its `t` range.
     #[inline]
     pub fn generate_ray(&self, x: f32, y: f32) -> Ray {
-        Ray::with_range(self.pos, (self.c2w * self.image_plane_point(x, y)).normalize(), self.near, self.far)
+        self.generate_ray_on(self.image_plane(), x, y)
     }
 
-    /// The point of the image plane z = −1 (camera space) at normalised
-    /// image coordinates `(x, y)`.
+    /// `generate_ray` with the image plane's tangents computed once by the
+    /// caller (two `tan` per ray were 4 % of a render's instructions).
     #[inline]
-    fn image_plane_point(&self, x: f32, y: f32) -> Vec3 {
-        Vec3::new((2.0 * x - 1.0) * (self.hfov_deg.to_radians() / 2.0).tan(), (2.0 * y - 1.0) * (self.vfov_deg.to_radians() / 2.0).tan(), -1.0)
+    pub fn generate_ray_on(&self, plane: ImagePlane, x: f32, y: f32) -> Ray {
+        Ray::with_range(self.pos, (self.c2w * plane.point(x, y)).normalize(), self.near, self.far)
+    }
+
+    /// The image plane z = −1 (camera space) of the current fields of view.
+    #[inline]
+    pub fn image_plane(&self) -> ImagePlane {
+        ImagePlane { tan_x: (self.hfov_deg.to_radians() / 2.0).tan(), tan_y: (self.vfov_deg.to_radians() / 2.0).tan() }
     }
 
     /// CS184's thin lens (`-b`, `-d`): the ray through normalised image
@@ -142,7 +148,13 @@ impl Camera {
     /// camera space, where the pinhole ray through the same pixel meets it.
     #[inline]
     pub fn generate_ray_thin_lens(&self, x: f32, y: f32, u: (f32, f32)) -> Ray {
-        let p = self.image_plane_point(x, y);
+        self.generate_ray_thin_lens_on(self.image_plane(), x, y, u)
+    }
+
+    /// `generate_ray_thin_lens` with the image plane computed by the caller.
+    #[inline]
+    pub fn generate_ray_thin_lens_on(&self, plane: ImagePlane, x: f32, y: f32, u: (f32, f32)) -> Ray {
+        let p = plane.point(x, y);
         let r = self.lens_radius * u.0.sqrt();
         let phi = 2.0 * std::f32::consts::PI * u.1;
         let lens = Vec3::new(r * phi.cos(), r * phi.sin(), 0.0);
@@ -219,6 +231,22 @@ impl Camera {
             lens_radius: v[29],
         };
         Ok(())
+    }
+}
+
+/// The camera's image plane z = −1 in camera space: the tangents of the
+/// half fields of view.
+#[derive(Clone, Copy, Debug)]
+pub struct ImagePlane {
+    tan_x: f32,
+    tan_y: f32,
+}
+
+impl ImagePlane {
+    /// The point at normalised image coordinates `(x, y)`.
+    #[inline]
+    fn point(self, x: f32, y: f32) -> Vec3 {
+        Vec3::new((2.0 * x - 1.0) * self.tan_x, (2.0 * y - 1.0) * self.tan_y, -1.0)
     }
 }
 

@@ -235,6 +235,7 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
     let mut batch: Vec<Ray> = Vec::with_capacity(active.len());
     let mut hits: Vec<Option<Hit>> = Vec::with_capacity(active.len());
     let mut radiance: Vec<Vec3> = Vec::with_capacity(active.len());
+    let plane = camera.image_plane();
     while !active.is_empty() {
         batch.clear();
         for &i in &active {
@@ -244,7 +245,7 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
             let (x, y) = ((p.x as f32 + jx) / w, (p.y as f32 + jy) / h);
             // A pinhole draws nothing more: `-b 0` images are those of a
             // camera without a lens, bit for bit.
-            batch.push(if camera.has_lens() { camera.generate_ray_thin_lens(x, y, p.sampler.lens()) } else { camera.generate_ray(x, y) });
+            batch.push(if camera.has_lens() { camera.generate_ray_thin_lens_on(plane, x, y, p.sampler.lens()) } else { camera.generate_ray_on(plane, x, y) });
         }
         hits.clear();
         hits.resize(batch.len(), None);
