@@ -153,7 +153,7 @@ fn area_light_pdf_is_a_density_over_solid_angle() {
             // MIS needs the pdf a BSDF ray hitting that point is given to
             // equal the one the sample was drawn with.
             let pathtracer::light::Target::Point(q) = s.target else { panic!("not a point") };
-            let ph = quad.pdf_hit(p, q, Vec3::NEG_Y);
+            let ph = quad.pdf_hit(&scene, p, q, Vec3::NEG_Y, s.prim);
             assert!((ph - s.pdf).abs() <= 1e-3 * s.pdf, "pdf_hit {ph} vs sample pdf {}", s.pdf);
             let x = 1.0 / s.pdf as f64;
             s1 += x;
@@ -166,6 +166,65 @@ fn area_light_pdf_is_a_density_over_solid_angle() {
         // in f32: se is 0 and the f32 rounding of Ω is the tolerance.
         assert!((mean - omega).abs() <= z * se + 1e-5 * omega, "from {p}: E[1/pdf] = {mean} +- {se}, solid angle {omega}");
     }
+}
+
+/// A flat hexagonal lamp of six triangles around its centre at height
+/// `y`, emitting downwards (-y): an emissive mesh that is not a rectangle.
+fn hexagon_lamp(center: Vec3, radius: f32) -> TriangleMesh {
+    let mut positions = vec![center];
+    for k in 0..6 {
+        let a = k as f32 * std::f32::consts::PI / 3.0;
+        positions.push(center + Vec3::new(radius * a.cos(), 0.0, radius * a.sin()));
+    }
+    // Winding (0, k, k+1) seen from below: normal -y.
+    let triangles = (0..6u32).map(|k| [0, 1 + k, 1 + (k + 1) % 6]).collect();
+    let mut m = TriangleMesh { positions, triangles, normals: vec![] };
+    m.compute_normals();
+    m
+}
+
+#[test]
+fn mesh_lights_sample_triangles_by_solid_angle_with_a_consistent_pdf() {
+    // A hexagonal lamp (six triangles, not a rectangle): a triangle picked by
+    // area, then sampled in its solid angle where 3e-4 < Ω < 6.22 sr, else by
+    // area. E[1/pdf] must be the lamp's whole solid angle (the sum of its
+    // triangles'), and `pdf_hit` must give the sample's pdf (MIS), from
+    // points where all, some or none of the triangles take the spherical path.
+    let center = Vec3::new(0.1, 1.0, -0.2);
+    let lamp = hexagon_lamp(center, 0.5);
+    let tris: Vec<[glam::DVec3; 3]> = lamp.triangles.iter().map(|t| t.map(|k| lamp.positions[k as usize].as_dvec3())).collect();
+    let scene = scene_of(vec![(Shape::Mesh(lamp), diffuse("lamp", 0.0, 2.0))], vec![]);
+    let lights = Lights::from_scene(&scene).unwrap();
+    let light = &lights.lights[0];
+    assert!(matches!(light, Light::Mesh { rect: None, spherical: true, .. }));
+    let points = [Vec3::new(0.0, 0.6, 0.0), Vec3::new(0.8, 0.95, 0.1), Vec3::new(-2.0, -3.0, 1.0), Vec3::new(0.0, -60.0, 0.0)];
+    let z = z_crit(0.01, points.len());
+    let mut spherical = 0;
+    for p in points {
+        let pd = p.as_dvec3();
+        let omega: f64 = tris.iter().map(|[a, b, c]| triangle_solid_angle(*a - pd, *b - pd, *c - pd)).sum();
+        let mut rng = Rng::new(8, 1);
+        let n = 400_000;
+        let (mut s1, mut s2) = (0.0f64, 0.0f64);
+        for _ in 0..n {
+            let (u, us) = (rng.uniform2(), rng.uniform());
+            let s = light.sample(&scene, p, u, us).unwrap_or_else(|| panic!("from {p}: no sample for {u:?} {us}"));
+            let pathtracer::light::Target::Point(q) = s.target else { panic!("not a point") };
+            let ph = light.pdf_hit(&scene, p, q, Vec3::NEG_Y, s.prim);
+            assert!((ph - s.pdf).abs() <= 1e-4 * s.pdf, "from {p}: pdf_hit {ph} vs sample pdf {}", s.pdf);
+            let [a, b, c] = tris[s.prim as usize].map(|v| v.as_vec3());
+            spherical += pathtracer::light::spherical_triangle::SphericalTriangle::new(p, a, b, c).is_some() as u32;
+            let x = 1.0 / s.pdf as f64;
+            s1 += x;
+            s2 += x * x;
+        }
+        let mean = s1 / n as f64;
+        let se = ((s2 / n as f64 - mean * mean).max(0.0) / (n as f64 - 1.0)).sqrt();
+        assert!(se < 0.01 * omega, "underpowered: se {se} for omega {omega}");
+        assert!((mean - omega).abs() <= z * se + 1e-5 * omega, "from {p}: E[1/pdf] = {mean} +- {se}, solid angle {omega}");
+    }
+    // The points cover both paths.
+    assert!(spherical > 0 && spherical < 4 * 400_000, "{spherical} spherical samples");
 }
 
 #[test]
@@ -187,7 +246,7 @@ fn sphere_lights_sampled_by_their_cone_give_the_closed_form_irradiance() {
         for _ in 0..n {
             let s = light.sample(&scene, p, rng.uniform2(), rng.uniform()).expect("the sphere is in view");
             let pathtracer::light::Target::Point(q) = s.target else { panic!("not a point") };
-            let ph = light.pdf_hit(p, q, (q - center).normalize());
+            let ph = light.pdf_hit(&scene, p, q, (q - center).normalize(), s.prim);
             assert!((ph - s.pdf).abs() <= 1e-3 * s.pdf, "d {d}: pdf_hit {ph} vs {}", s.pdf);
             let x = (s.value.x * s.wi.y.max(0.0) / s.pdf) as f64;
             s1 += x;
@@ -394,11 +453,13 @@ fn cs184_light_and_sky_sampling_agree_with_ours() {
             (Shape::Mesh(ground), diffuse("ground", 0.5, 0.0)),
             (Shape::Mesh(cube_mesh(0.5, Vec3::new(-0.3, -0.5, -3.0), false)), diffuse("cube", 0.7, 0.0)),
             (Shape::Sphere { center: Vec3::new(0.9, -0.6, -2.6), radius: 0.3 }, diffuse("lamp", 0.0, 4.0)),
+            // Close above the cube: its triangles are sampled by solid angle.
+            (Shape::Mesh(hexagon_lamp(Vec3::new(-0.3, 0.3, -3.0), 0.4)), diffuse("hexagon", 0.0, 3.0)),
         ],
         vec![sky],
     );
     let sky_cam = camera_at(&sky_scene, Vec3::new(0.0, 0.0, 0.0), w, h);
-    for (what, scene, cam, m) in [("Cornell box -m 1", &box_scene, &box_cam, 1), ("Cornell box -m 3", &box_scene, &box_cam, 3), ("sky, sphere lamp -m 2", &sky_scene, &sky_cam, 2)] {
+    for (what, scene, cam, m) in [("Cornell box -m 1", &box_scene, &box_cam, 1), ("Cornell box -m 3", &box_scene, &box_cam, 3), ("sky, sphere and hexagon lamps -m 2", &sky_scene, &sky_cam, 2)] {
         let ours = Lights::from_scene(scene).unwrap();
         let theirs = Lights::from_scene(scene).unwrap().with_sampling(true, true);
         let a = render_stats_with(scene, &ours, cam, BackendKind::Native, m, true, false, true, 1024, 21, w, h);

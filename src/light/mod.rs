@@ -19,14 +19,18 @@
 //!   lights and two-triangle rectangular meshes — by solid angle
 //!   (`spherical_rect`), spheres seen from outside by their cone
 //!   (`sphere_cone`), the hemisphere light at diffuse vertices by the lune
-//!   (`lune`); other meshes by area. `pdf_hit` applies the same choice.
+//!   (`lune`); other meshes pick a triangle by area, then sample it by its
+//!   solid angle where that pays (`spherical_triangle`), else by area.
+//!   `pdf_hit` applies the same choice.
 
 pub mod environment;
 pub mod lune;
 pub mod sphere_cone;
 pub mod spherical_rect;
+pub mod spherical_triangle;
 
 use spherical_rect::RectEmitter;
+use spherical_triangle::SphericalTriangle;
 
 pub use environment::EnvMap;
 
@@ -48,9 +52,11 @@ pub enum Light {
     /// towards `normal`; sampled by solid angle where it subtends enough
     /// (`solid_angle`), else by area.
     Rect { corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3, radiance: Vec3, solid_angle: bool },
-    /// The triangles of an emissive mesh, sampled by area; or, when they
-    /// form one rectangle (`rect`), by solid angle where it subtends enough.
-    Mesh { geom_id: u32, cdf: Vec<f32>, area: f32, radiance: Vec3, rect: Option<RectEmitter> },
+    /// The triangles of an emissive mesh: when they form one rectangle
+    /// (`rect`), sampled by solid angle where it subtends enough; else a
+    /// triangle picked by area, then sampled by its solid angle where that
+    /// pays (`spherical`, see `spherical_triangle`), else by area.
+    Mesh { geom_id: u32, cdf: Vec<f32>, area: f32, radiance: Vec3, rect: Option<RectEmitter>, spherical: bool },
     /// An emissive sphere; sampled by its cone from outside (`cone`), else by area.
     Sphere { center: Vec3, radius: f32, radiance: Vec3, cone: bool },
     /// A latitude-longitude environment map (`-e`).
@@ -79,6 +85,9 @@ pub struct LightSample {
     /// Drawn uniformly over the whole solid angle the light subtends from
     /// the shading point (`Light::covers`).
     pub covers: bool,
+    /// The primitive the sample lies on (a mesh's triangle; 0 otherwise), as
+    /// `pdf_hit` takes it.
+    pub prim: u32,
 }
 
 impl Light {
@@ -107,12 +116,20 @@ impl Light {
     }
 
     /// Solid-angle pdf with which `sample` from `p` picks the point `x` (normal
-    /// `n`) of this emitter's surface; 0 for lights that are not surfaces.
-    pub fn pdf_hit(&self, p: Vec3, x: Vec3, n: Vec3) -> f32 {
+    /// `n`, on primitive `prim`) of this emitter's surface; 0 for lights that
+    /// are not surfaces.
+    pub fn pdf_hit(&self, scene: &Scene, p: Vec3, x: Vec3, n: Vec3, prim: u32) -> f32 {
         // The same choice `sample` makes from `p`.
         if let Light::Mesh { rect: Some(r), .. } = self {
             if let Some(sr) = r.from(p) {
                 return 1.0 / sr.omega;
+            }
+        }
+        if let Light::Mesh { geom_id, cdf, area, rect: None, spherical: true, .. } = self {
+            let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { return 0.0 };
+            let [a, b, c] = m.triangles[prim as usize].map(|k| m.positions[k as usize]);
+            if let Some(st) = SphericalTriangle::new(p, a, b, c) {
+                return (triangle_share(cdf, prim as usize, *area) / st.omega) as f32;
             }
         }
         if let Light::Sphere { center, radius, cone: true, .. } = self {
@@ -192,15 +209,15 @@ impl Light {
                     let wi = d / dist;
                     let near = offset_ray_origin(*position, -wi, position.abs().max_element());
                     let target = if (*position - near).length() < dist / 8192.0 { *position - wi * (dist / 8192.0) } else { near };
-                    LightSample { wi, value: *intensity / r2, pdf: 1.0, target: Target::Point(target), covers: false }
+                    LightSample { wi, value: *intensity / r2, pdf: 1.0, target: Target::Point(target), covers: false, prim: 0 }
                 })
             }
-            Light::Directional { to_light, irradiance } => Some(LightSample { wi: *to_light, value: *irradiance, pdf: 1.0, target: Target::Infinite, covers: false }),
+            Light::Directional { to_light, irradiance } => Some(LightSample { wi: *to_light, value: *irradiance, pdf: 1.0, target: Target::Infinite, covers: false, prim: 0 }),
             Light::Hemisphere { radiance, .. } => {
                 // Uniform over the upper hemisphere: local z maps to world +y.
                 let l = uniform_hemisphere(u.0, u.1);
                 let wi = Vec3::new(l.x, l.z, -l.y);
-                Some(LightSample { wi, value: *radiance, pdf: UNIFORM_HEMISPHERE_PDF, target: Target::Infinite, covers: false })
+                Some(LightSample { wi, value: *radiance, pdf: UNIFORM_HEMISPHERE_PDF, target: Target::Infinite, covers: false, prim: 0 })
             }
             Light::Rect { corner, ex, ey, normal, radiance, solid_angle } => {
                 if let Some(sr) = RectEmitter::new(*corner, *ex, *ey, *normal).filter(|_| *solid_angle).and_then(|r| r.from(p)) {
@@ -210,17 +227,25 @@ impl Light {
                 let q = *corner + *ex * u.0 + *ey * u.1;
                 area_sample(p, q, *normal, magnitude(&[*corner, *corner + *ex + *ey, *corner + *ex, *corner + *ey]), *radiance, 1.0 / area)
             }
-            Light::Mesh { geom_id, cdf, area, radiance, rect } => {
+            Light::Mesh { geom_id, cdf, area, radiance, rect, spherical } => {
                 if let Some((r, sr)) = rect.and_then(|r| r.from(p).map(|sr| (r, sr))) {
                     return solid_angle_sample(p, sr.sample(u), r.normal, magnitude(&[r.corner, r.corner + r.ex + r.ey]), *radiance, 1.0 / sr.omega);
                 }
                 let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { return None };
                 let i = cdf.partition_point(|&c| c <= u_sel * area).min(cdf.len() - 1);
                 let [a, b, c] = m.triangles[i].map(|k| m.positions[k as usize]);
-                let (bu, bv) = uniform_triangle(u.0, u.1);
-                let q = a * (1.0 - bu - bv) + b * bu + c * bv;
                 let n = crate::geometry::face_normal(a, b, c);
-                area_sample(p, q, n, magnitude(&[a, b, c]), *radiance, 1.0 / area)
+                let s = match SphericalTriangle::new(p, a, b, c).filter(|_| *spherical && rect.is_none()) {
+                    // One triangle's share of the mesh, uniform in its solid angle.
+                    Some(st) => solid_angle_sample(p, st.sample(u), n, magnitude(&[a, b, c]), *radiance, (triangle_share(cdf, i, *area) / st.omega) as f32)
+                        .map(|s| LightSample { covers: false, ..s }),
+                    None => {
+                        let (bu, bv) = uniform_triangle(u.0, u.1);
+                        let q = a * (1.0 - bu - bv) + b * bu + c * bv;
+                        area_sample(p, q, n, magnitude(&[a, b, c]), *radiance, 1.0 / area)
+                    }
+                };
+                s.map(|s| LightSample { prim: i as u32, ..s })
             }
             Light::Sphere { center, radius, radiance, cone } => {
                 let mag = center.abs().max_element() + radius;
@@ -235,10 +260,17 @@ impl Light {
             }
             Light::Environment(e) => {
                 let (wi, value, pdf) = e.sample(u)?;
-                Some(LightSample { wi, value, pdf, target: Target::Infinite, covers: false })
+                Some(LightSample { wi, value, pdf, target: Target::Infinite, covers: false, prim: 0 })
             }
         }
     }
+}
+
+/// The probability that a mesh light picks triangle `i` (∝ its area; `cdf`
+/// holds the running sums of the areas).
+fn triangle_share(cdf: &[f32], i: usize, area: f32) -> f64 {
+    let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
+    (cdf[i] - lo) as f64 / area as f64
 }
 
 /// A sample at `q` drawn uniformly in solid angle (pdf `pdf`), of a
@@ -248,7 +280,7 @@ fn solid_angle_sample(p: Vec3, q: Vec3, n: Vec3, mag: f32, radiance: Vec3, pdf: 
     if !(-n.dot(wi) > 0.0) || !(pdf > 0.0 && pdf.is_finite()) {
         return None;
     }
-    Some(LightSample { wi, value: radiance, pdf, target: Target::Point(offset_ray_origin(q, n, mag)), covers: true })
+    Some(LightSample { wi, value: radiance, pdf, target: Target::Point(offset_ray_origin(q, n, mag)), covers: true, prim: 0 })
 }
 
 /// Convert an area-measure sample at `q` (normal `n`, one-sided) into a
@@ -266,7 +298,7 @@ fn area_sample(p: Vec3, q: Vec3, n: Vec3, mag: f32, radiance: Vec3, pdf_area: f3
     }
     // The shadow ray stops just short of the emitter: its end is pushed off
     // the surface, towards the receiver, by the same ulp offset as origins.
-    Some(LightSample { wi, value: radiance, pdf: pdf_area * dist2 / cos_l, target: Target::Point(offset_ray_origin(q, n, mag)), covers: false })
+    Some(LightSample { wi, value: radiance, pdf: pdf_area * dist2 / cos_l, target: Target::Point(offset_ray_origin(q, n, mag)), covers: false, prim: 0 })
 }
 
 /// Radiance leaving the surface at `it` towards `wo` (unit, pointing away).
@@ -315,7 +347,7 @@ impl Lights {
                         out.of_geometry[g] = Some(out.lights.len());
                         let tris: Vec<[Vec3; 3]> = m.triangles.iter().map(|t| t.map(|k| m.positions[k as usize])).collect();
                         let rect = RectEmitter::of_triangles(&tris);
-                        out.lights.push(Light::Mesh { geom_id: g as u32, cdf, area: acc, radiance, rect });
+                        out.lights.push(Light::Mesh { geom_id: g as u32, cdf, area: acc, radiance, rect, spherical: true });
                     }
                 }
                 Shape::Sphere { center, radius } => {
@@ -389,7 +421,7 @@ impl Lights {
     pub fn with_sampling(mut self, area: bool, uniform_sky: bool) -> Lights {
         for l in &mut self.lights {
             match l {
-                Light::Mesh { rect, .. } if area => *rect = None,
+                Light::Mesh { rect, spherical, .. } if area => (*rect, *spherical) = (None, false),
                 Light::Rect { solid_angle, .. } if area => *solid_angle = false,
                 Light::Sphere { cone, .. } if area => *cone = false,
                 Light::Hemisphere { lune, .. } if uniform_sky => *lune = false,

@@ -94,7 +94,7 @@ impl PathTracer<'_> {
                 if c.alone && light.covers(v.it.p) {
                     return 0.0; // estimated by its light samples alone
                 }
-                let pl = light.pdf_hit(v.it.p, hit.p, hit.ng);
+                let pl = light.pdf_hit(self.scene, v.it.p, hit.p, hit.ng, hit.prim_id);
                 power_heuristic(c.pdf, self.light_samples as f32 * pl)
             }
             None => 1.0,

@@ -189,7 +189,7 @@ impl PathTracer<'_> {
                 let lune = alone && matches!(light, Light::Hemisphere { lune: true, .. });
                 let s = match light {
                     Light::Hemisphere { radiance, .. } if lune => {
-                        lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true })
+                        lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true, prim: 0 })
                     }
                     _ => light.sample(self.scene, v.it.p, u, u_sel),
                 };
