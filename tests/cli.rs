@@ -182,6 +182,23 @@ fn adaptive_sampling_writes_a_rate_image_and_stops_early() {
 }
 
 #[test]
+fn adaptive_batches_are_powers_of_two_with_sobol() {
+    // Sobol points are nets in aligned power-of-two blocks: -a 48 checks every
+    // 64 samples (and says so), so every pixel keeps a multiple of 64; with
+    // independent numbers the batch stays 48.
+    let d = scratch("adaptive_pow2");
+    for (sampler, batch) in [("sobol", 64u64), ("independent", 48)] {
+        let png = d.join(format!("{sampler}.png"));
+        let out = run(&d, &["-s", "192", "-a", "48", "0.05", "-m", "1", "-r", "32", "24", "--sampler", sampler, "-f", png.to_str().unwrap()]);
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(text.contains("-a 48: Sobol samples are stratified in blocks of powers of two; checking every 64 samples"), sampler == "sobol", "{text}");
+        let kept: u64 = text.split(" samples kept").next().unwrap().rsplit(' ').next().unwrap().parse().unwrap();
+        assert!(kept > 0 && kept % batch == 0, "{sampler}: {kept} samples kept is not a multiple of {batch}");
+        assert!(kept < 192 * 32 * 24, "{sampler}: no pixel stopped early");
+    }
+}
+
+#[test]
 fn depth_and_object_id_images_describe_the_first_hit() {
     // One ray through each pixel centre: every object-id pixel is black or one exported
     // id colour, depth is positive exactly where something was hit, and on the back wall it

@@ -112,6 +112,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     if spp == 0 || spp > 1 << 20 {
         crate::bail!("-s {spp}: samples per pixel must be between 1 and 1048576");
     }
+    let mut batch_note = None;
     let adaptive = match &a.adaptive {
         None => None,
         Some(v) => {
@@ -123,6 +124,16 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             if !(tol > 0.0 && tol.is_finite()) {
                 crate::bail!("-a {batch} {tol}: the tolerance must be a positive number");
             }
+            // Owen-scrambled Sobol points are stratified in aligned blocks of
+            // 2^m samples: a pixel that stops (or, with the pilot rule, is
+            // given) a multiple of a power-of-two batch keeps whole blocks.
+            let batch = if a.sampler == SamplerArg::Sobol && !batch.is_power_of_two() {
+                let b = batch.checked_next_power_of_two().unwrap_or(1 << 31);
+                batch_note = Some(format!("-a {batch}: Sobol samples are stratified in blocks of powers of two; checking every {b} samples"));
+                b
+            } else {
+                batch
+            };
             Some(Adaptive { batch, tolerance: tol, pilot: a.adaptive_pilot })
         }
     };
@@ -192,6 +203,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         }
         IntegratorKind::Normals | IntegratorKind::Depth | IntegratorKind::ObjectId => Lights::default(),
     };
+    if let Some(note) = &batch_note {
+        println!("{}: {note}", scene.name);
+    }
     let built = accel::build(a.backend, &scene.shapes, threads)?;
     let integrator: Box<dyn Integrator> = match a.integrator {
         IntegratorKind::Normals => Box::new(NormalShading { scene: &scene, accel: built.accel.as_ref() }),
