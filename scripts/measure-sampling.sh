@@ -1,14 +1,19 @@
 #!/usr/bin/env bash
-# Error against time for the samplers (issue 13's protocol, the sampler axis
-# so far): for each scene, a high-spp reference, then every sampler at
-# 4, 16, 64, 256 spp over several seeds; prints relMSE (mean over seeds),
-# the log-log slope of relMSE against spp, render seconds (from the summary
-# line: process start and scene load excluded) and efficiency
-# 1/(relMSE * seconds), plus the Sobol / independent relMSE ratio.
+# Error against time for the sampling techniques (issue 13's protocol): for
+# each scene, a high-spp reference, then every combination of the axes that
+# scene exercises — sampler (independent | sobol) x light sampling (area |
+# solid-angle: rectangles and spheres) x sky sampling (uniform | lune: the
+# hemisphere light at diffuse vertices) — at 4, 16, 64, 256 spp over several
+# seeds. Prints relMSE (mean over seeds), the log-log slope of relMSE against
+# spp, render seconds (median over seeds, from the summary line: process
+# start and scene load excluded), efficiency 1/(relMSE * seconds), and the
+# gain of each row over the CS184 row (independent, area, uniform) at the
+# same spp, in relMSE and in efficiency.
 #
-#   scripts/measure-sampling.sh [-r "W H"] [-n SEEDS] [-R REF_SPP] [SCENE_KEY...]
+#   scripts/measure-sampling.sh [-r "W H"] [-n SEEDS] [-R REF_SPP] [-s "SPPS"] [SCENE_KEY...]
 # scene keys: m1 (built-in scene, direct light), m5 (built-in, -m 5),
-#             bunny (sky/bunny.dae), env (sky/bunny_unlit.dae -e studio.exr)
+#             bunny (sky/bunny.dae -m 5: the hemisphere light),
+#             env (sky/bunny_unlit.dae -e studio.exr -m 5)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 res="160 120"; seeds=8; ref_spp=8192; spps="4 16 64 256"
@@ -30,45 +35,58 @@ pt="$PWD/target/release/pathtracer"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
+need() {
+    [[ -e "$1" ]] || { echo "measure-sampling: $1 not found (the shared scenes and maps)" >&2; exit 1; }
+}
 args_of() {
     case "$1" in
         m1) echo "-m 1" ;;
         m5) echo "-m 5" ;;
-        bunny) echo "$shared/sky/bunny.dae -m 5" ;;
-        env) echo "$shared/sky/bunny_unlit.dae -e $envmaps/studio.exr -m 5" ;;
+        bunny) need "$shared/sky/bunny.dae"; echo "$shared/sky/bunny.dae -m 5" ;;
+        env) need "$shared/sky/bunny_unlit.dae"; need "$envmaps/studio.exr"; echo "$shared/sky/bunny_unlit.dae -e $envmaps/studio.exr -m 5" ;;
         *) echo "measure-sampling: unknown scene key $1" >&2; exit 2 ;;
     esac
 }
+# The axes a scene exercises: combinations as "sampler light sky".
+combos_of() {
+    case "$1" in
+        m1 | m5) echo "independent,area,uniform sobol,area,uniform independent,solid-angle,uniform sobol,solid-angle,uniform" ;;
+        bunny) echo "independent,area,uniform sobol,area,uniform independent,area,lune sobol,area,lune" ;;
+        env) echo "independent,area,uniform sobol,area,uniform" ;;
+    esac
+}
 
-echo "CPU: $(lscpu | sed -n 's/^Model name: *//p' | head -1) ($(nproc) cores); -r $res --keep-fov; $seeds seeds; reference $ref_spp spp (sobol)"
-printf '%-6s %-12s %5s %12s %8s %9s %12s %10s\n' scene sampler spp relMSE slope seconds efficiency "ind/sobol"
+echo "CPU: $(lscpu | sed -n 's/^Model name: *//p' | head -1) ($(nproc) cores); -r $res --keep-fov; $seeds seeds; reference $ref_spp spp (sobol, solid-angle, lune)"
+printf '%-6s %-12s %-12s %-8s %5s %11s %7s %9s %11s %9s %9s\n' scene sampler light sky spp relMSE slope seconds efficiency "gain" "eff.gain"
 for key in "${keys[@]}"; do
     read -r -a a <<<"$(args_of "$key")"
     ref="$work/$key-ref.exr"
     "$pt" "${a[@]}" -r $res --keep-fov -s "$ref_spp" --seed 99991 --exr "$ref" -f "$work/ref.png" >/dev/null
-    declare -A err=()
-    for sampler in independent sobol; do
+    declare -A err=() eff=()
+    for combo in $(combos_of "$key"); do
+        IFS=, read -r sampler light sky <<<"$combo"
         prev=""
         for spp in $spps; do
-            total=0; secs=0
+            total=0; times=()
             for ((s = 0; s < seeds; s++)); do
-                out="$("$pt" "${a[@]}" -r $res --keep-fov -s "$spp" --sampler "$sampler" --seed "$s" --exr "$work/x.exr" -f "$work/x.png")"
-                t="$(sed -n 's/.*| render \([0-9.]*\) s |.*/\1/p' <<<"$out")"
+                out="$("$pt" "${a[@]}" -r $res --keep-fov -s "$spp" --sampler "$sampler" --light-sampling "$light" --sky-sampling "$sky" --seed "$s" --exr "$work/x.exr" -f "$work/x.png")"
+                times+=("$(sed -n 's/.*| render \([0-9.]*\) s |.*/\1/p' <<<"$out")")
                 e="$("$pt" compare "$ref" "$work/x.exr" | sed -n 's/.*relMSE \([0-9.e+-]*\) .*/\1/p')"
                 total="$(awk -v a="$total" -v b="$e" 'BEGIN { print a + b }')"
-                secs="$(awk -v a="$secs" -v b="$t" 'BEGIN { print a + b }')"
             done
-            mse="$(awk -v a="$total" -v n="$seeds" 'BEGIN { printf "%.4e", a / n }')"
-            sec="$(awk -v a="$secs" -v n="$seeds" 'BEGIN { printf "%.3f", a / n }')"
+            mse="$(awk -v a="$total" -v n="$seeds" 'BEGIN { printf "%.3e", a / n }')"
+            sec="$(printf '%s\n' "${times[@]}" | sort -g | awk '{ v[NR] = $1 } END { printf "%.4f", (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }')"
             slope="-"
             [[ -n "$prev" ]] && slope="$(awk -v a="$prev" -v b="$mse" 'BEGIN { printf "%.2f", log(b / a) / log(4) }')"
             prev="$mse"
-            err[$sampler-$spp]="$mse"
-            ratio="-"
-            [[ "$sampler" == sobol ]] && ratio="$(awk -v a="${err[independent-$spp]}" -v b="$mse" 'BEGIN { printf "%.2f", a / b }')"
-            eff="$(awk -v m="$mse" -v t="$sec" 'BEGIN { printf "%.4g", 1 / (m * t) }')"
-            printf '%-6s %-12s %5s %12s %8s %9s %12s %10s\n' "$key" "$sampler" "$spp" "$mse" "$slope" "$sec" "$eff" "$ratio"
+            e_now="$(awk -v m="$mse" -v t="$sec" 'BEGIN { printf "%.4g", 1 / (m * t) }')"
+            if [[ "$combo" == "independent,area,uniform" ]]; then
+                err[$spp]="$mse"; eff[$spp]="$e_now"
+            fi
+            gain="$(awk -v a="${err[$spp]}" -v b="$mse" 'BEGIN { printf "%.2fx", a / b }')"
+            egain="$(awk -v a="${eff[$spp]}" -v b="$e_now" 'BEGIN { printf "%.2fx", b / a }')"
+            printf '%-6s %-12s %-12s %-8s %5s %11s %7s %9s %11s %9s %9s\n' "$key" "$sampler" "$light" "$sky" "$spp" "$mse" "$slope" "$sec" "$e_now" "$gain" "$egain"
         done
     done
-    unset err
+    unset err eff
 done
