@@ -93,9 +93,15 @@ impl PathTracer<'_> {
                 p
             })
             .collect();
-        let (mut shadow, mut closest): (Vec<Ray>, Vec<Ray>) = (Vec::new(), Vec::new());
-        let (mut occluded, mut found): (Vec<bool>, Vec<Option<Hit>>) = (Vec::new(), Vec::new());
-        let mut terms: Vec<Term> = Vec::new();
+        // Sized for a bounce's worst case up front (every path drawing every
+        // light sample, and with -H its hemisphere samples): grown on demand,
+        // these were 4000 reallocations per CBempty render, 1 % of its work.
+        let per_light = self.lights.lights.len() * self.light_samples as usize;
+        let hemi = if self.hemisphere { per_light.max(self.light_samples as usize) } else { 0 };
+        let n = rays.len();
+        let (mut shadow, mut closest): (Vec<Ray>, Vec<Ray>) = (Vec::with_capacity(n * per_light), Vec::with_capacity(n * (1 + hemi)));
+        let (mut occluded, mut found): (Vec<bool>, Vec<Option<Hit>>) = (Vec::with_capacity(n * per_light), Vec::with_capacity(n * (1 + hemi)));
+        let mut terms: Vec<Term> = Vec::with_capacity(n * (per_light + self.lights.lights.len() + hemi + 1));
         loop {
             shadow.clear();
             closest.clear();
