@@ -112,6 +112,9 @@ impl PixelSums {
                 changed = true;
                 x = if x.is_nan() { 0.0 } else { SAMPLE_LIMIT.copysign(x) };
             }
+            if x == 0.0 {
+                continue; // adds nothing (black samples are common: escaped rays, shadow)
+            }
             let x = x as f64;
             self.sum[c] = self.sum[c].add(Fixed::from_f64(x));
             self.sum_sq[c] = self.sum_sq[c].add(Fixed::from_f64(x * x));
