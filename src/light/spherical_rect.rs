@@ -82,26 +82,33 @@ impl SphericalRect {
     /// The point for (u, v): uniform in solid angle as (u, v) is uniform.
     pub fn sample(&self, (u, v): (f32, f32)) -> Vec3 {
         // The direction's x: the sub-rectangle [x0, xu] subtends u·Ω. With
-        // t = t0 + u·Ω, cot-like f = (cos t·b0 + b1) / sin t.
+        // t = t0 + u·Ω, Ureña et al.'s f = cot-like (cos t·b0 + b1) / sin t
+        // = N / D, cu = sign(f) / √(f² + b0²) and xu = −cu·z0 / √(1 − cu²)
+        // simplify to xu = −sign(N)·D·z0 / √(N² + (b0² − 1)·D²): one square
+        // root and one division where the paper's form chains three of each
+        // (a dependency chain of long latencies, once per light sample).
         let (sin_s, cos_s) = (u * self.omega).sin_cos();
         let cos_t = self.cos_t0 * cos_s - self.sin_t0 * sin_s;
-        let sin_t = self.sin_t0 * cos_s + self.cos_t0 * sin_s;
-        let f = (cos_t * self.b0 + self.b1) / sin_t;
-        let cu = (f.signum() / (f * f + self.b0 * self.b0).sqrt()).clamp(-1.0, 1.0);
-        let xu = if cu.abs() < 1.0 {
-            (-cu * self.z0 / (1.0 - cu * cu).sqrt()).clamp(self.x0, self.x1)
-        } else if cu > 0.0 {
-            self.x0
+        let d = self.sin_t0 * cos_s + self.cos_t0 * sin_s;
+        let n = cos_t * self.b0 + self.b1;
+        let q = n * n + (self.b0 * self.b0 - 1.0) * d * d;
+        let sd = n.signum() * d;
+        let xu = if q > 0.0 {
+            (-sd * self.z0 / q.sqrt()).clamp(self.x0, self.x1)
+        } else if sd > 0.0 {
+            self.x0 // |cu| = 1: the edge
         } else {
             self.x1
         };
-        // Then y, uniform in the solid angle of the strip at xu.
-        let l = (xu * xu + self.z0 * self.z0).sqrt();
-        let h0 = self.y0 / (l * l + self.y0 * self.y0).sqrt();
-        let h1 = self.y1 / (l * l + self.y1 * self.y1).sqrt();
+        // Then y, uniform in the solid angle of the strip at xu: with
+        // l² = xu² + z0², h = h0 + v·(h1 − h0) for h_j = y_j / √(l² + y_j²)
+        // and yv = h·l / √(1 − h²).
+        let l2 = xu * xu + self.z0 * self.z0;
+        let h0 = self.y0 / (l2 + self.y0 * self.y0).sqrt();
+        let h1 = self.y1 / (l2 + self.y1 * self.y1).sqrt();
         let h = h0 + v * (h1 - h0);
         let h2 = h * h;
-        let yv = if h2 < 1.0 - 1e-6 { (h * l / (1.0 - h2).sqrt()).clamp(self.y0, self.y1) } else { self.y1 };
+        let yv = if h2 < 1.0 - 1e-6 { (h * (l2 / (1.0 - h2)).sqrt()).clamp(self.y0, self.y1) } else { self.y1 };
         self.o + self.x * xu + self.y * yv + self.z * self.z0
     }
 }
