@@ -13,14 +13,24 @@
 //! luminance × sin θ and returns its *corner* direction with the unfiltered
 //! texel's radiance, a Riemann sum that is biased (w·h discrete directions,
 //! an infinite pdf on row 0, a radiance that is not what escaping rays see).
-//! Here a texel is picked with probability ∝ (integral of the bilinear
-//! luminance over the texel) × sin θ at its centre, the direction is jittered
-//! uniformly inside the texel (the leftover of the two uniforms that picked
-//! it), and the pdf is the exact density of that direction,
-//! p(texel)·w·h / (2π² sin θ) with the sample's own θ. The value returned is
-//! the same bilinear lookup escaping rays see. Every texel whose bilinear
-//! support can be non-zero has a positive probability (the integral covers
-//! the 3×3 neighbourhood), so the estimator is unbiased.
+//! Here the map is cut into the *patches* of the bilinear lookup — the cells
+//! between four texel centres (w × (h + 1) of them: half-height rows above
+//! the first centres and below the last, where the lookup is clamped), on
+//! each of which the lookup's luminance is one bilinear function f. A patch
+//! is picked with probability ∝ (∫ f over the patch) × sin θ at its centre,
+//! and a point inside it with density ∝ f itself (a linear marginal in y,
+//! then a linear conditional in x, each inverted in closed form from the
+//! leftover of the uniform that picked the patch). So the pdf follows the
+//! radiance inside every patch, not only from patch to patch: a light
+//! sample's luminance ÷ pdf varies only with sin θ across a patch. The pdf
+//! is the exact density of the direction, P(patch)·f(x, y)/∫f ·
+//! w·h / (2π² sin θ) with the sample's own θ; the value returned is the same
+//! bilinear lookup escaping rays see. f > 0 wherever the lookup is non-zero
+//! (both come from the same corners), so the estimator is unbiased.
+//! Measured on a bunny under studio.exr (softboxes with sharp edges) at
+//! `-m 1`, 64 spp, 4 seeds, 256x192: uniform points in texels picked by the
+//! texel's integral had 1.8x the variance of Cycles 3.4 per sample; see the
+//! README.
 
 use crate::error::Result;
 use crate::render::illuminance;
@@ -40,12 +50,16 @@ pub struct EnvMap {
     pub height: usize,
     /// Row 0 is the top (θ = 0).
     pub texels: Vec<Vec3>,
-    /// Cumulative row probabilities (length h + 1, from 0 to 1).
+    /// Cumulative probabilities of the h + 1 patch rows (length h + 2,
+    /// from 0 to 1).
     row_cdf: Vec<f64>,
-    /// Per row, cumulative column probabilities within the row (w + 1 each).
+    /// Per patch row, cumulative probabilities of its w patches within the
+    /// row (w + 1 each).
     col_cdf: Vec<f64>,
-    /// Probability of each texel (row-major).
+    /// Probability of each patch ((h + 1) × w, row-major).
     prob: Vec<f64>,
+    /// Luminance of each texel (the corners of the patches).
+    lum: Vec<f64>,
 }
 
 impl EnvMap {
@@ -75,47 +89,69 @@ impl EnvMap {
     pub fn from_texels(path: String, width: usize, height: usize, texels: Vec<Vec3>) -> EnvMap {
         let (w, h) = (width, height);
         let lum: Vec<f64> = texels.iter().map(|&t| illuminance(t.max(Vec3::ZERO)) as f64).collect();
-        // Integral of the bilinear function over a texel: in 1D, over
-        // [i, i+1] with centres at i + 0.5, it is 1/8, 3/4, 1/8 of texels
-        // i-1, i, i+1 (wrapping in x, clamped in y as the lookup is).
-        const K: [f64; 3] = [0.125, 0.75, 0.125];
-        let mut horiz = vec![0.0f64; w * h];
-        for j in 0..h {
-            for i in 0..w {
-                horiz[j * w + i] = (0..3).map(|k| K[k] * lum[j * w + (i + w + k - 1) % w]).sum();
-            }
-        }
-        let mut weight = vec![0.0f64; w * h];
-        for j in 0..h {
-            let sin = (PI * (j as f64 + 0.5) / h as f64).sin();
-            for i in 0..w {
-                let s: f64 = (0..3).map(|k| K[k] * horiz[(j + k).saturating_sub(1).min(h - 1) * w + i]).sum();
-                weight[j * w + i] = s * sin;
+        let mut map = EnvMap { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)], lum };
+        let mut weight = vec![0.0f64; w * (h + 1)];
+        for q in 0..=h {
+            let (y0, y1) = map.patch_rows(q);
+            let sin = (PI * 0.5 * (y0 + y1) / h as f64).sin();
+            for p in 0..w {
+                let [a, b, c, d] = map.corners(p, q);
+                weight[q * w + p] = (y1 - y0) * 0.25 * (a + b + c + d) * sin;
             }
         }
         let total: f64 = weight.iter().sum();
-        let mut prob = vec![0.0f64; w * h];
-        let mut row_cdf = vec![0.0f64; h + 1];
-        let mut col_cdf = vec![0.0f64; (w + 1) * h];
         if total > 0.0 {
-            for j in 0..h {
-                let row: f64 = weight[j * w..(j + 1) * w].iter().sum();
-                row_cdf[j + 1] = row_cdf[j] + row / total;
+            for q in 0..=h {
+                let row: f64 = weight[q * w..(q + 1) * w].iter().sum();
+                map.row_cdf[q + 1] = map.row_cdf[q] + row / total;
                 let mut acc = 0.0;
-                for i in 0..w {
-                    prob[j * w + i] = weight[j * w + i] / total;
-                    acc += weight[j * w + i];
-                    col_cdf[j * (w + 1) + i + 1] = if row > 0.0 { acc / row } else { (i + 1) as f64 / w as f64 };
+                for p in 0..w {
+                    map.prob[q * w + p] = weight[q * w + p] / total;
+                    acc += weight[q * w + p];
+                    map.col_cdf[q * (w + 1) + p + 1] = if row > 0.0 { acc / row } else { (p + 1) as f64 / w as f64 };
                 }
             }
-            row_cdf[h] = 1.0;
+            map.row_cdf[h + 1] = 1.0;
         }
-        EnvMap { path, width, height, texels, row_cdf, col_cdf, prob }
+        map
+    }
+
+    /// The y range (texel units) of patch row q: half a row above the first
+    /// texel centres, whole rows between centres, half a row below the last.
+    fn patch_rows(&self, q: usize) -> (f64, f64) {
+        let h = self.height as f64;
+        match q {
+            0 => (0.0, 0.5),
+            q if q == self.height => (h - 0.5, h),
+            q => (q as f64 - 0.5, q as f64 + 0.5),
+        }
+    }
+
+    /// The corner luminances [top-left, top-right, bottom-left, bottom-right]
+    /// of patch (p, q): texel columns p and p + 1 (wrapping), rows q − 1 and
+    /// q (clamped, as the lookup is).
+    fn corners(&self, p: usize, q: usize) -> [f64; 4] {
+        let (w, h) = (self.width, self.height);
+        let (top, bottom) = (q.saturating_sub(1), q.min(h - 1));
+        let (l, r) = (p, (p + 1) % w);
+        [self.lum[top * w + l], self.lum[top * w + r], self.lum[bottom * w + l], self.lum[bottom * w + r]]
+    }
+
+    /// The patch holding texel coordinates (x, y), and (x, y) in it as (s, t) ∈ [0, 1]².
+    fn patch_at(&self, x: f64, y: f64) -> (usize, usize, f64, f64) {
+        let (w, h) = (self.width, self.height);
+        let fx = x - 0.5;
+        let p0 = fx.floor();
+        let s = (fx - p0).clamp(0.0, 1.0);
+        let p = (p0 as i64).rem_euclid(w as i64) as usize;
+        let q = if y < 0.5 { 0 } else if y >= h as f64 - 0.5 { h } else { ((y + 0.5).floor() as usize).clamp(1, h - 1) };
+        let (y0, y1) = self.patch_rows(q);
+        (p, q, s, ((y - y0) / (y1 - y0)).clamp(0.0, 1.0))
     }
 
     /// Whether the map is black everywhere (nothing to sample).
     pub fn is_black(&self) -> bool {
-        self.row_cdf[self.height] == 0.0
+        self.row_cdf[self.height + 1] == 0.0
     }
 
     /// (x, y) texel coordinates of a unit direction, x in [0, w), y in [0, h].
@@ -166,50 +202,76 @@ impl EnvMap {
             return 0.0;
         }
         let (x, y, sin_t) = self.texel_coords(d);
-        let sin_t = sin_t.max(POLE_SIN);
-        let i = (x as usize).min(self.width - 1);
-        let j = (y as usize).min(self.height - 1);
-        self.texel_pdf(self.prob[j * self.width + i], sin_t)
+        let (p, q, s, t) = self.patch_at(x, y);
+        self.patch_pdf(p, q, s, t, sin_t.max(POLE_SIN))
     }
 
-    fn texel_pdf(&self, p: f64, sin_t: f64) -> f32 {
-        (p * (self.width * self.height) as f64 / (2.0 * PI * PI * sin_t)) as f32
+    /// The solid-angle pdf of the point (s, t) of patch (p, q), at sin θ.
+    fn patch_pdf(&self, p: usize, q: usize, s: f64, t: f64, sin_t: f64) -> f32 {
+        let prob = self.prob[q * self.width + p];
+        if !(prob > 0.0) {
+            return 0.0;
+        }
+        let [a, b, c, d] = self.corners(p, q);
+        let mean = 0.25 * (a + b + c + d);
+        let f = (1.0 - t) * ((1.0 - s) * a + s * b) + t * ((1.0 - s) * c + s * d);
+        let (y0, y1) = self.patch_rows(q);
+        // Density in texel units: P · f / ∫f, with ∫f = mean · (y1 − y0).
+        let pdf_xy = prob * f / (mean * (y1 - y0));
+        (pdf_xy * (self.width * self.height) as f64 / (2.0 * PI * PI * sin_t)) as f32
     }
 
-    /// A direction with probability ∝ the table, its radiance and its pdf;
-    /// `None` for a black map or a sample exactly at a pole.
+    /// A direction with probability ∝ the patch table and, inside the patch,
+    /// the bilinear luminance; its radiance and its pdf. `None` for a black
+    /// map or a sample exactly at a pole.
     pub fn sample(&self, u: (f32, f32)) -> Option<(Vec3, Vec3, f32)> {
         if self.is_black() {
             return None;
         }
         let (w, h) = (self.width, self.height);
-        // Row from u.1, then column from u.0 within it; each uniform's
-        // leftover inside the chosen interval jitters the point in the texel.
+        // Patch row from u.1, then the patch from u.0 within it; each
+        // uniform's leftover inside the chosen interval places the point.
         let u1 = u.1 as f64;
-        let j = (self.row_cdf.partition_point(|&c| c <= u1) - 1).min(h - 1);
-        let (r0, r1) = (self.row_cdf[j], self.row_cdf[j + 1]);
-        let dy = if r1 > r0 { ((u1 - r0) / (r1 - r0)).clamp(0.0, 1.0) } else { 0.5 };
-        let cdf = &self.col_cdf[j * (w + 1)..(j + 1) * (w + 1)];
+        let q = (self.row_cdf.partition_point(|&c| c <= u1) - 1).min(h);
+        let (r0, r1) = (self.row_cdf[q], self.row_cdf[q + 1]);
+        let v_left = if r1 > r0 { ((u1 - r0) / (r1 - r0)).clamp(0.0, 1.0) } else { 0.5 };
+        let cdf = &self.col_cdf[q * (w + 1)..(q + 1) * (w + 1)];
         let u0 = u.0 as f64;
-        let i = (cdf.partition_point(|&c| c <= u0) - 1).min(w - 1);
-        let (c0, c1) = (cdf[i], cdf[i + 1]);
-        let dx = if c1 > c0 { ((u0 - c0) / (c1 - c0)).clamp(0.0, 1.0) } else { 0.5 };
-        let p = self.prob[j * w + i];
-        if !(p > 0.0) {
+        let p = (cdf.partition_point(|&c| c <= u0) - 1).min(w - 1);
+        let (c0, c1) = (cdf[p], cdf[p + 1]);
+        let u_left = if c1 > c0 { ((u0 - c0) / (c1 - c0)).clamp(0.0, 1.0) } else { 0.5 };
+        if !(self.prob[q * w + p] > 0.0) {
             return None;
         }
-        let (x, y) = (i as f64 + dx, j as f64 + dy);
-        let (d, sin_exact) = self.direction(x, y);
-        // sin θ of the direction as returned (f32), as `pdf` computes it:
-        // near the poles the f64 value differs in the fourth digit. Where
-        // the f32 direction rounds onto the pole, keep the exact value.
-        let dy = d.y as f64;
-        let sin_t = (1.0 - dy * dy).max(0.0).sqrt().max(POLE_SIN);
+        // Inside the patch, ∝ f(s, t): t from the linear marginal
+        // (a + b)/2 … (c + d)/2, then s from the linear conditional.
+        let [a, b, c, d] = self.corners(p, q);
+        let t = sample_linear(v_left, a + b, c + d);
+        let s = sample_linear(u_left, (1.0 - t) * a + t * c, (1.0 - t) * b + t * d);
+        let (y0, y1) = self.patch_rows(q);
+        let (x, y) = ((p as f64 + 0.5 + s) % w as f64, y0 + t * (y1 - y0));
+        let (dir, sin_exact) = self.direction(x, y);
         if !(sin_exact > 0.0) {
             return None;
         }
-        Some((d, self.bilerp(x, y), self.texel_pdf(p, sin_t)))
+        // sin θ of the direction as returned (f32), as `pdf` computes it:
+        // near the poles the f64 value differs in the fourth digit. Where
+        // the f32 direction rounds onto the pole, keep the exact value.
+        let dy = dir.y as f64;
+        let sin_t = (1.0 - dy * dy).max(0.0).sqrt().max(POLE_SIN);
+        Some((dir, self.bilerp(x, y), self.patch_pdf(p, q, s, t, sin_t)))
     }
+}
+
+/// x ∈ [0, 1] with density ∝ (1 − x)·a + x·b (a, b ≥ 0, not both 0), from a
+/// uniform u: the inverse of its quadratic CDF, in the form that stays exact
+/// as a → b (no cancellation): x = u(a + b) / (a + √((1 − u)a² + u b²)).
+fn sample_linear(u: f64, a: f64, b: f64) -> f64 {
+    if u == 0.0 && a == 0.0 {
+        return 0.0;
+    }
+    let x = u * (a + b) / (a + ((1.0 - u) * a * a + u * b * b).sqrt());
+    x.clamp(0.0, 1.0)
 }
 
 #[cfg(test)]
@@ -280,13 +342,33 @@ mod tests {
     }
 
     #[test]
-    fn every_texel_the_lookup_can_light_can_be_sampled() {
-        // One bright texel: the lookup is non-zero in its 3x3 neighbourhood
-        // of texels, so all of them need a positive probability.
+    fn every_direction_the_lookup_lights_can_be_sampled() {
+        // One bright texel: the lookup is non-zero around it (out to the
+        // neighbouring texel centres), and every such direction needs a
+        // positive pdf; directions farther away have none.
         let m = map(8, 6, |i, j| if (i, j) == (0, 0) { Vec3::ONE } else { Vec3::ZERO });
-        for (i, j) in [(7usize, 0usize), (0, 0), (1, 0), (7, 1), (0, 1), (1, 1)] {
-            assert!(m.prob[j * 8 + i] > 0.0, "texel {i},{j}");
+        let mut rng = Rng::new(4, 4);
+        let mut lit = 0;
+        for _ in 0..20_000 {
+            let (x, y) = (rng.uniform() as f64 * 8.0, rng.uniform() as f64 * 6.0);
+            let (d, _) = m.direction(x, y);
+            let (l, pdf) = (m.eval(d), m.pdf(d));
+            assert_eq!(l.max_element() > 0.0, pdf > 0.0, "at ({x}, {y}): radiance {l}, pdf {pdf}");
+            lit += (pdf > 0.0) as u32;
         }
-        assert_eq!(m.prob[3 * 8 + 4], 0.0);
+        assert!(lit > 100, "{lit}");
+    }
+
+    #[test]
+    fn linear_sampling_inverts_its_cdf() {
+        for (a, b) in [(1.0, 1.0), (0.0, 1.0), (1.0, 0.0), (0.3, 5.0), (2.0, 1e-9)] {
+            for k in 0..=20 {
+                let u = k as f64 / 20.0;
+                let x = sample_linear(u, a, b);
+                // CDF of (1 - x) a + x b, normalised: (a x + (b - a) x²/2) / ((a + b)/2).
+                let cdf = (a * x + (b - a) * x * x / 2.0) / ((a + b) / 2.0);
+                assert!((cdf - u).abs() < 1e-9, "a {a} b {b} u {u}: x {x} cdf {cdf}");
+            }
+        }
     }
 }
