@@ -19,6 +19,7 @@ mod frustum;
 mod interleave;
 mod kernels;
 mod layout;
+mod masked;
 
 use kernels::{intersect_group, sort_far_first, LaneHit, Shear, Slab};
 use layout::Arrays;
