@@ -610,4 +610,3 @@ fn take_hits<const ANY: bool, const N: usize>(
         }
     }
 }
-

@@ -58,21 +58,7 @@ impl Slab {
             use std::arch::x86_64::*;
             let rows = n.bounds.as_ptr() as *const f32;
             if AVX && W == 8 {
-                // SAFETY: the caller runs with AVX2 enabled; rows are 32 bytes
-                // and the node is 64-byte aligned.
-                let mut t0 = _mm256_set1_ps(tmin);
-                let mut t1 = _mm256_set1_ps(tmax * ROBUST_SCALE);
-                let scale = _mm256_set1_ps(ROBUST_SCALE);
-                for a in 0..3 {
-                    let o = _mm256_set1_ps(self.o[a]);
-                    let inv = _mm256_set1_ps(self.inv[a]);
-                    let lo = _mm256_load_ps(rows.add(self.near_plane[a] * W));
-                    let hi = _mm256_load_ps(rows.add((self.near_plane[a] + 3) % 6 * W));
-                    let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-                    let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
-                    t0 = _mm256_max_ps(tn, t0);
-                    t1 = _mm256_min_ps(tf, t1);
-                }
+                let (t0, t1) = self.entry_exit_avx(n, tmin, tmax);
                 _mm256_storeu_ps(near.as_mut_ptr(), t0);
                 return _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
             }
@@ -101,6 +87,36 @@ impl Slab {
         {
             self.test_scalar(n, tmin, tmax, near)
         }
+    }
+
+    /// The AVX2 body of `test`: per child of an 8-wide node, the entry
+    /// distance and the (scaled) exit distance; the ray enters child i when
+    /// lane i has entry ≤ exit. Shared with `masked`, whose per-ray node
+    /// tests must do exactly these operations.
+    ///
+    /// # Safety
+    /// The caller runs with AVX2 enabled; `W` must be 8.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(super) unsafe fn entry_exit_avx<const W: usize>(&self, n: &Node<W>, tmin: f32, tmax: f32) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        debug_assert_eq!(W, 8);
+        // Rows are 32 bytes and the node is 64-byte aligned.
+        let rows = n.bounds.as_ptr() as *const f32;
+        let mut t0 = _mm256_set1_ps(tmin);
+        let mut t1 = _mm256_set1_ps(tmax * ROBUST_SCALE);
+        let scale = _mm256_set1_ps(ROBUST_SCALE);
+        for a in 0..3 {
+            let o = _mm256_set1_ps(self.o[a]);
+            let inv = _mm256_set1_ps(self.inv[a]);
+            let lo = _mm256_load_ps(rows.add(self.near_plane[a] * W));
+            let hi = _mm256_load_ps(rows.add((self.near_plane[a] + 3) % 6 * W));
+            let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
+            let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
+            t0 = _mm256_max_ps(tn, t0);
+            t1 = _mm256_min_ps(tf, t1);
+        }
+        (t0, t1)
     }
 
     /// `test` one lane at a time, for targets without x86 SIMD (and the

@@ -23,7 +23,6 @@
 use super::frustum::PACKET;
 use super::kernels::{sort_far_first, Shear, Slab};
 use super::{WideBvh, EMPTY, LEAF_BIT, STACK};
-use crate::accel::bvh::ROBUST_SCALE;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use std::mem::MaybeUninit;
@@ -73,10 +72,8 @@ impl<const W: usize> WideBvh<W> {
         let mut sp = 0;
         let (mut code, mut entered) = (self.root, active);
         let inf = _mm256_set1_ps(f32::INFINITY);
-        let scale = _mm256_set1_ps(ROBUST_SCALE);
         loop {
             let node = &self.nodes[code as usize];
-            let rows = node.bounds.as_ptr() as *const f32;
             // Each ray that entered this node against its 8 boxes: per
             // child, the bits of the rays entering it and their nearest
             // entry distance.
@@ -86,19 +83,7 @@ impl<const W: usize> WideBvh<W> {
             while todo != 0 {
                 let i = todo.trailing_zeros() as usize;
                 todo &= todo - 1;
-                let s = slabs[i].assume_init_ref();
-                let mut t0 = _mm256_set1_ps(tmin[i]);
-                let mut t1 = _mm256_set1_ps(tmax[i] * ROBUST_SCALE);
-                for a in 0..3 {
-                    let o = _mm256_set1_ps(s.o[a]);
-                    let inv = _mm256_set1_ps(s.inv[a]);
-                    let lo = _mm256_load_ps(rows.add(s.near_plane[a] * W));
-                    let hi = _mm256_load_ps(rows.add((s.near_plane[a] + 3) % 6 * W));
-                    let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-                    let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
-                    t0 = _mm256_max_ps(tn, t0);
-                    t1 = _mm256_min_ps(tf, t1);
-                }
+                let (t0, t1) = slabs[i].assume_init_ref().entry_exit_avx(node, tmin[i], tmax[i]);
                 let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
                 masks = _mm256_or_si256(masks, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << i)));
                 near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));
@@ -122,20 +107,24 @@ impl<const W: usize> WideBvh<W> {
                 // A leaf: the rays that entered it test its triangles, two at
                 // a time where it holds only triangles.
                 let leaf = self.leaf_of(child);
+                macro_rules! ensure {
+                    ($k:expr) => {
+                        if setup & (1 << $k) == 0 {
+                            setup |= 1 << $k;
+                            let rt = RayTransform::new(rays[$k].origin, rays[$k].dir);
+                            shears[$k].write(Shear::new(&rt));
+                            rts[$k].write(rt);
+                        }
+                    };
+                }
                 while r != 0 {
                     let i = r.trailing_zeros() as usize;
                     r &= r - 1;
-                    for k in [i, if r != 0 { r.trailing_zeros() as usize } else { usize::MAX }] {
-                        if k != usize::MAX && setup & (1 << k) == 0 {
-                            setup |= 1 << k;
-                            let rt = RayTransform::new(rays[k].origin, rays[k].dir);
-                            shears[k].write(Shear::new(&rt));
-                            rts[k].write(rt);
-                        }
-                    }
+                    ensure!(i);
                     if r != 0 && leaf.n_spheres == 0 {
                         let j = r.trailing_zeros() as usize;
                         r &= r - 1;
+                        ensure!(j);
                         let found = self.leaf_pair::<true>(&leaf, [i, j], rays, &rts, &shears, &mut tmax, &mut unused);
                         for (k, hit) in [i, j].into_iter().zip(found) {
                             if hit {
