@@ -5,13 +5,19 @@ use glam::Vec3;
 /// A ray `origin + t * dir`, restricted to the half-open range `tmin < t <= tmax`.
 ///
 /// `dir` need not be normalised; `t` is then measured in units of `dir`.
+///
+/// `repr(C)`: the packet traversals load 8 rays as 8 rows of 8 floats
+/// (origin, direction, tmin, tmax) and transpose them.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct Ray {
     pub origin: Vec3,
     pub dir: Vec3,
     pub tmin: f32,
     pub tmax: f32,
 }
+
+const _: () = assert!(std::mem::size_of::<Ray>() == 32);
 
 impl Ray {
     pub fn new(origin: Vec3, dir: Vec3) -> Self {

@@ -53,6 +53,13 @@ impl RayTransform {
 }
 
 impl RayTransform {
+    /// A transform whose axes `[kx, ky, kz]` and quotients `[sx, sy, sz]`
+    /// were computed as `new` computes them (the packet set-up does it for
+    /// 16 rays at once).
+    pub(crate) fn from_shear(origin: Vec3, k: [usize; 3], s: [f32; 3]) -> Self {
+        RayTransform { origin, kx: k[0], ky: k[1], kz: k[2], sx: s[0], sy: s[1], sz: s[2] }
+    }
+
     /// The shear as `([kx, ky, kz], [sx, sy, sz])`, for SIMD versions of the
     /// test that must compute exactly what `intersect_triangle` does.
     pub fn shear(&self) -> ([usize; 3], [f32; 3]) {

@@ -3,7 +3,7 @@
 //! packet against the packet's *interval* ray (the box of its origins and
 //! of its reciprocal directions); each leaf box the interval ray enters is
 //! then tested against all the packet's rays at once (`RaysSoA::test`, 8
-//! rays per instruction), and only the rays that enter it intersect its
+//! rays per instruction; the rays are set up together, `packet`), and only the rays that enter it intersect its
 //! triangles, two rays per AVX2 instruction (`intersect_group_x2`).
 //!
 //! Measured (1 thread, Mrays/s, camera/shadow): testing each ray against
@@ -24,13 +24,13 @@
 //! for shadow rays, with a ray mask per node (`masked`).
 
 use super::kernels::{intersect_group, intersect_group_x2, intersect_group_x4, LaneHit};
-use super::{Shear, Slab, WideBvh, EMPTY, LANES, LEAF_BIT, STACK};
+use super::packet::RaysSoA;
+use super::{Shear, WideBvh, EMPTY, LANES, LEAF_BIT, STACK};
 use crate::accel::bvh::ROBUST_SCALE;
 use crate::accel::prims::closer;
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
-use glam::Vec3A;
 use std::mem::MaybeUninit;
 
 /// A packet gives up and finishes ray by ray once more than this many of
@@ -76,58 +76,46 @@ pub(super) struct Frustum {
     o_hi: [f32; 3],
     inv_lo: [f32; 3],
     inv_hi: [f32; 3],
-    near_plane: [usize; 3],
+    pub(super) near_plane: [usize; 3],
     tmin: f32,
 }
 
 impl Frustum {
-    /// `None` when the rays do not all go the same way on every axis or,
-    /// with `limit_spread` (shadow rays), when they fan out by more than
-    /// `MAX_SPREAD`. Camera rays are checked against `MAX_CAMERA_SPREAD` on
-    /// their raw directions: normalising every direction cost 13 % of their
-    /// throughput on the cow. The reciprocals are the
-    /// slab test's (`Slab::new`), one SIMD division per ray.
-    pub(super) fn new(rays: &[Ray], limit_spread: bool) -> Option<Frustum> {
-        let first = rays.first()?;
-        let neg = first.dir.is_negative_bitmask();
-        let (mut o_lo, mut o_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let (mut i_lo, mut i_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let (mut d_lo, mut d_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let mut tmin = f32::INFINITY;
-        for r in rays {
-            let (o, d) = (Vec3A::from(r.origin), Vec3A::from(r.dir));
-            let inv = Vec3A::ONE / d;
-            // Zero components (infinite reciprocals) would make the interval
-            // products NaN; mixed signs change the near plane.
-            if !r.is_valid() || !inv.is_finite() || d.is_negative_bitmask() != neg {
-                return None;
-            }
-            // Camera rays are unit already: their raw components bound the
-            // spread for two min/max per ray.
-            let u = if limit_spread { d.normalize() } else { d };
-            d_lo = d_lo.min(u);
-            d_hi = d_hi.max(u);
-            o_lo = o_lo.min(o);
-            o_hi = o_hi.max(o);
-            i_lo = i_lo.min(inv);
-            i_hi = i_hi.max(inv);
-            tmin = tmin.min(r.tmin);
-        }
-        let spread = (d_hi - d_lo).max_element();
-        if limit_spread && spread > MAX_SPREAD {
+    /// `None` when the rays do not all go the same way on every axis (or
+    /// one is invalid, or has a zero direction component) or, with
+    /// `limit_spread` (shadow rays), when their unit directions fan out by
+    /// more than `MAX_SPREAD`. Camera rays are checked against
+    /// `MAX_CAMERA_SPREAD` on their raw directions. The bounds come from
+    /// the packet's set-up (`RaysSoA::new`).
+    pub(super) fn of(soa: &RaysSoA, limit_spread: bool) -> Option<Frustum> {
+        let b = &soa.bounds;
+        if !b.uniform {
             return None;
         }
-        if !limit_spread && spread > MAX_CAMERA_SPREAD * d_lo.abs().max(d_hi.abs()).max_element() {
+        let spread = |lo: &[f32; 3], hi: &[f32; 3]| (0..3).map(|a| hi[a] - lo[a]).fold(f32::NEG_INFINITY, f32::max);
+        if limit_spread && spread(&b.unit_lo, &b.unit_hi) > MAX_SPREAD {
+            return None;
+        }
+        let largest = (0..3).map(|a| b.d_lo[a].abs().max(b.d_hi[a].abs())).fold(0.0f32, f32::max);
+        if !limit_spread && spread(&b.d_lo, &b.d_hi) > MAX_CAMERA_SPREAD * largest {
             return None;
         }
         Some(Frustum {
-            o_lo: o_lo.to_array(),
-            o_hi: o_hi.to_array(),
-            inv_lo: i_lo.to_array(),
-            inv_hi: i_hi.to_array(),
-            near_plane: [0, 1, 2].map(|a| if neg & (1 << a) != 0 { 3 + a } else { a }),
-            tmin,
+            o_lo: b.o_lo,
+            o_hi: b.o_hi,
+            inv_lo: b.inv_lo,
+            inv_hi: b.inv_hi,
+            near_plane: [0, 1, 2].map(|a| if soa.neg[a] & 1 != 0 { 3 + a } else { a }),
+            tmin: b.tmin,
         })
+    }
+
+    /// `of` the rays' own set-up (for the tests; the CPU must have AVX2).
+    #[cfg(test)]
+    pub(super) fn new(rays: &[Ray], limit_spread: bool) -> Option<Frustum> {
+        assert!(is_x86_feature_detected!("avx2"), "the packet set-up needs AVX2");
+        // SAFETY: AVX2 checked just above.
+        Frustum::of(&unsafe { RaysSoA::new(rays) }, limit_spread)
     }
 
     /// Bit i set when some ray of the packet may enter child i in
@@ -171,87 +159,6 @@ impl Frustum {
         }
         _mm256_storeu_ps(near.as_mut_ptr(), t0);
         _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32
-    }
-}
-
-/// A packet's rays in SoA form for testing them together against one box:
-/// the slab constants of `Slab::new`, ray by ray. Made when the packet
-/// first reaches a leaf: packets that leave the tree high up (background
-/// pixels) never pay for it.
-pub(super) struct RaysSoA {
-    o: [[f32; PACKET]; 3],
-    inv: [[f32; PACKET]; 3],
-    tmin: [f32; PACKET],
-}
-
-impl RaysSoA {
-    /// Up to `PACKET` rays; lanes past them hold finite placeholders.
-    pub(super) fn new(rays: &[Ray]) -> RaysSoA {
-        let mut soa = RaysSoA { o: [[0.0; PACKET]; 3], inv: [[1.0; PACKET]; 3], tmin: [0.0; PACKET] };
-        for (i, r) in rays.iter().enumerate() {
-            let slab = Slab::new(r);
-            for a in 0..3 {
-                soa.o[a][i] = slab.o[a];
-                soa.inv[a][i] = slab.inv[a];
-            }
-            soa.tmin[i] = r.tmin;
-        }
-        soa
-    }
-
-    /// Bit i set when ray i enters child `lane` of `n` in [tmin_i, tmax[i]]:
-    /// `Slab::test` of each ray for that one box, 8 rays per instruction
-    /// instead of 8 boxes, the same operations on each lane. The packet's
-    /// rays share their direction signs, so the near planes are `f`'s.
-    ///
-    /// # Safety
-    /// The CPU must have AVX2; `W` must be 8.
-    #[inline(always)]
-    pub(super) unsafe fn test<const W: usize>(&self, f: &Frustum, n: &super::Node<W>, lane: usize, tmax: &[f32; PACKET]) -> u64 {
-        use std::arch::x86_64::*;
-        let scale = _mm256_set1_ps(ROBUST_SCALE);
-        let mut mask = 0u64;
-        for half in (0..PACKET).step_by(8) {
-            let mut t0 = _mm256_loadu_ps(self.tmin.as_ptr().add(half));
-            let mut t1 = _mm256_mul_ps(_mm256_loadu_ps(tmax.as_ptr().add(half)), scale);
-            for a in 0..3 {
-                let lo = _mm256_set1_ps(n.bounds[f.near_plane[a]][lane]);
-                let hi = _mm256_set1_ps(n.bounds[(f.near_plane[a] + 3) % 6][lane]);
-                let o = _mm256_loadu_ps(self.o[a].as_ptr().add(half));
-                let inv = _mm256_loadu_ps(self.inv[a].as_ptr().add(half));
-                let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-                let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
-                t0 = _mm256_max_ps(tn, t0);
-                t1 = _mm256_min_ps(tf, t1);
-            }
-            mask |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u64) << half;
-        }
-        mask
-    }
-}
-
-impl RaysSoA {
-    /// `test` with all 16 rays in one AVX-512 register.
-    ///
-    /// # Safety
-    /// The CPU must have AVX-512F; `W` must be 8.
-    #[inline(always)]
-    pub(super) unsafe fn test512<const W: usize>(&self, f: &Frustum, n: &super::Node<W>, lane: usize, tmax: &[f32; PACKET]) -> u64 {
-        use std::arch::x86_64::*;
-        let scale = _mm512_set1_ps(ROBUST_SCALE);
-        let mut t0 = _mm512_loadu_ps(self.tmin.as_ptr());
-        let mut t1 = _mm512_mul_ps(_mm512_loadu_ps(tmax.as_ptr()), scale);
-        for a in 0..3 {
-            let lo = _mm512_set1_ps(n.bounds[f.near_plane[a]][lane]);
-            let hi = _mm512_set1_ps(n.bounds[(f.near_plane[a] + 3) % 6][lane]);
-            let o = _mm512_loadu_ps(self.o[a].as_ptr());
-            let inv = _mm512_loadu_ps(self.inv[a].as_ptr());
-            let tn = _mm512_mul_ps(_mm512_sub_ps(lo, o), inv);
-            let tf = _mm512_mul_ps(_mm512_mul_ps(_mm512_sub_ps(hi, o), inv), scale);
-            t0 = _mm512_max_ps(tn, t0);
-            t1 = _mm512_min_ps(tf, t1);
-        }
-        _mm512_cmp_ps_mask::<_CMP_LE_OQ>(t0, t1) as u64
     }
 }
 
@@ -299,9 +206,14 @@ impl<const W: usize> WideBvh<W> {
     unsafe fn closest_packets<const WIDE: bool>(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         let mut unused = [false; PACKET];
         for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            match Frustum::new(r, false) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<false, WIDE>(&f, r, h, &mut unused),
-                _ => self.closest_all::<true>(r, h),
+            if self.root & LEAF_BIT != 0 || r.len() < 2 {
+                self.closest_all::<true>(r, h);
+                continue;
+            }
+            let soa = RaysSoA::new(r);
+            match Frustum::of(&soa, false) {
+                Some(f) => self.frustum_packet::<false, WIDE>(&f, &soa, r, h, &mut unused),
+                None => self.closest_all::<true>(r, h),
             }
         }
     }
@@ -311,11 +223,15 @@ impl<const W: usize> WideBvh<W> {
     unsafe fn any_packets<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool]) {
         let mut unused = [None; PACKET];
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
-            match Frustum::new(r, true) {
-                Some(f) if self.root & LEAF_BIT == 0 && r.len() > 1 => self.frustum_packet::<true, WIDE>(&f, r, &mut unused, o),
+            if self.root & LEAF_BIT != 0 || r.len() < 2 {
+                self.any_all::<true>(r, o);
+                continue;
+            }
+            let soa = RaysSoA::new(r);
+            match Frustum::of(&soa, true) {
+                Some(f) => self.frustum_packet::<true, WIDE>(&f, &soa, r, &mut unused, o),
                 // Fanned out or of mixed signs: a ray mask per node.
-                _ if r.len() > 1 => self.any_masked(r, o),
-                _ => self.any_all::<true>(r, o),
+                None => self.any_masked(&soa, r, o),
             }
         }
     }
@@ -324,12 +240,10 @@ impl<const W: usize> WideBvh<W> {
     /// (rays leave the packet once occluded). `WIDE`: with the AVX-512
     /// kernels (16 rays per leaf box test, 4 per triangle group test).
     #[inline(always)]
-    unsafe fn frustum_packet<const ANY: bool, const WIDE: bool>(&self, f: &Frustum, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
+    unsafe fn frustum_packet<const ANY: bool, const WIDE: bool>(&self, f: &Frustum, soa: &RaysSoA, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
         let n = rays.len();
-        // Per-ray constants are set up the first time a ray tests a node
-        // itself: packets that leave the tree high up (background pixels)
-        // never pay for them.
-        let mut soa: Option<RaysSoA> = None;
+        // The triangle-test constants are copied out of the set-up the
+        // first time a ray reaches a leaf.
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut shears: [MaybeUninit<Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut setup: u64 = 0;
@@ -389,14 +303,13 @@ impl<const W: usize> WideBvh<W> {
                     self.prefetch(node.child[m.trailing_zeros() as usize]);
                     m &= m - 1;
                 }
-                let soa = soa.get_or_insert_with(|| RaysSoA::new(rays));
                 // Leaf by leaf, the rays that enter it (tested 8 at a time,
                 // the single-ray slab test's operations lane by lane).
                 let mut todo = mask & leaves;
                 while todo != 0 {
                     let lane = todo.trailing_zeros() as usize;
                     todo &= todo - 1;
-                    let mut rays_in = if WIDE { soa.test512(f, node, lane, &tmax) } else { soa.test(f, node, lane, &tmax) } & active;
+                    let mut rays_in = if WIDE { soa.test512(&f.near_plane, node, lane, &tmax) } else { soa.test(&f.near_plane, node, lane, &tmax) } & active;
                     if rays_in == 0 {
                         wasted += 1;
                         continue;
@@ -407,8 +320,8 @@ impl<const W: usize> WideBvh<W> {
                         ($i:expr) => {
                             if setup & (1u64 << $i) == 0 {
                                 setup |= 1u64 << $i;
-                                let rt = RayTransform::new(rays[$i].origin, rays[$i].dir);
-                                shears[$i].write(Shear::new(&rt));
+                                let (rt, sh) = soa.shear($i);
+                                shears[$i].write(sh);
                                 rts[$i].write(rt);
                             }
                         };

@@ -22,6 +22,7 @@
 
 use super::frustum::PACKET;
 use super::kernels::{sort_far_first, Shear, Slab};
+use super::packet::RaysSoA;
 use super::{WideBvh, EMPTY, LEAF_BIT, STACK};
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
@@ -34,7 +35,7 @@ impl<const W: usize> WideBvh<W> {
     /// The CPU must have AVX2 and the caller must be compiled with it; `W`
     /// must be 8.
     #[inline(always)]
-    pub(super) unsafe fn any_masked(&self, rays: &[Ray], out: &mut [bool]) {
+    pub(super) unsafe fn any_masked(&self, soa: &RaysSoA, rays: &[Ray], out: &mut [bool]) {
         use std::arch::x86_64::*;
         debug_assert!(W == 8 && rays.len() <= PACKET);
         let n = rays.len();
@@ -44,13 +45,13 @@ impl<const W: usize> WideBvh<W> {
         let mut tmax = [0.0f32; PACKET];
         let mut tmin = [0.0f32; PACKET];
         let mut active: u32 = 0;
-        for (i, r) in rays.iter().enumerate() {
+        for i in 0..n {
             out[i] = false;
-            if r.is_valid() {
+            if soa.valid >> i & 1 != 0 {
                 active |= 1 << i;
-                slabs[i].write(Slab::new(r));
-                tmin[i] = r.tmin;
-                tmax[i] = r.tmax;
+                slabs[i].write(soa.slab(i));
+                tmin[i] = soa.tmin[i];
+                tmax[i] = soa.tmax[i];
             }
         }
         if active == 0 || self.root == EMPTY {
@@ -111,8 +112,8 @@ impl<const W: usize> WideBvh<W> {
                     ($k:expr) => {
                         if setup & (1 << $k) == 0 {
                             setup |= 1 << $k;
-                            let rt = RayTransform::new(rays[$k].origin, rays[$k].dir);
-                            shears[$k].write(Shear::new(&rt));
+                            let (rt, sh) = soa.shear($k);
+                            shears[$k].write(sh);
                             rts[$k].write(rt);
                         }
                     };

@@ -20,6 +20,7 @@ mod interleave;
 mod kernels;
 mod layout;
 mod masked;
+mod packet;
 
 use kernels::{intersect_group, sort_far_first, LaneHit, Shear, Slab};
 use layout::Arrays;
