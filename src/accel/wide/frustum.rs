@@ -3,8 +3,9 @@
 //! packet against the packet's *interval* ray (the box of its origins and
 //! of its reciprocal directions); each leaf box the interval ray enters is
 //! then tested against all the packet's rays at once (`RaysSoA::test`, 8
-//! rays per instruction; the rays are set up together, `packet`), and only the rays that enter it intersect its
-//! triangles, two rays per AVX2 instruction (`intersect_group_x2`).
+//! rays per instruction; the rays are set up together, `packet`), and only
+//! the rays that enter it intersect its triangles, two rays per AVX2
+//! instruction (`intersect_group_x2`).
 //!
 //! Measured (1 thread, Mrays/s, camera/shadow): testing each ray against
 //! the 8 boxes of a leaf parent instead of each leaf box against the rays
