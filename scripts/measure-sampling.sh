@@ -3,12 +3,13 @@
 # each scene, a high-spp reference, then every combination of the axes that
 # scene exercises — sampler (independent | sobol) x light sampling (area |
 # solid-angle: rectangles and spheres) x sky sampling (uniform | lune: the
-# hemisphere light at diffuse vertices) — at 4, 16, 64, 256 spp over several
+# hemisphere light at diffuse vertices) x environment sampling (map | product:
+# the map times the receiver's cosine bound) — at 4, 16, 64, 256 spp over several
 # seeds. Prints relMSE (mean over seeds), the log-log slope of relMSE against
 # spp, render seconds (median over seeds, from the summary line: process
 # start and scene load excluded), efficiency 1/(relMSE * seconds), and the
 # gain of each row over the CS184 row (independent, area, uniform) at the
-# same spp, in relMSE and in efficiency.
+# same spp, in relMSE and in efficiency (CS184's row; for env, its map row).
 #
 #   scripts/measure-sampling.sh [-r "W H"] [-n SEEDS] [-R REF_SPP] [-s "SPPS"] [SCENE_KEY...]
 # scene keys: m1 (built-in scene, direct light), m5 (built-in, -m 5),
@@ -50,26 +51,26 @@ args_of() {
 # The axes a scene exercises: combinations as "sampler light sky".
 combos_of() {
     case "$1" in
-        m1 | m5) echo "independent,area,uniform sobol,area,uniform independent,solid-angle,uniform sobol,solid-angle,uniform" ;;
-        bunny) echo "independent,area,uniform sobol,area,uniform independent,area,lune sobol,area,lune" ;;
-        env) echo "independent,area,uniform sobol,area,uniform" ;;
+        m1 | m5) echo "independent,area,uniform,map sobol,area,uniform,map independent,solid-angle,uniform,map sobol,solid-angle,uniform,map" ;;
+        bunny) echo "independent,area,uniform,map sobol,area,uniform,map independent,area,lune,map sobol,area,lune,map" ;;
+        env) echo "independent,area,uniform,map sobol,area,uniform,map independent,area,uniform,product sobol,area,uniform,product" ;;
     esac
 }
 
-echo "CPU: $(lscpu | sed -n 's/^Model name: *//p' | head -1) ($(nproc) cores); -r $res --keep-fov; $seeds seeds; reference $ref_spp spp (sobol, solid-angle, lune)"
-printf '%-6s %-12s %-12s %-8s %5s %11s %7s %9s %11s %9s %9s\n' scene sampler light sky spp relMSE slope seconds efficiency "gain" "eff.gain"
+echo "CPU: $(lscpu | sed -n 's/^Model name: *//p' | head -1) ($(nproc) cores); -r $res --keep-fov; $seeds seeds; reference $ref_spp spp (sobol, solid-angle, lune, product)"
+printf '%-6s %-12s %-12s %-8s %-8s %5s %11s %7s %9s %11s %9s %9s\n' scene sampler light sky env spp relMSE slope seconds efficiency "gain" "eff.gain"
 for key in "${keys[@]}"; do
     read -r -a a <<<"$(args_of "$key")"
     ref="$work/$key-ref.exr"
     "$pt" "${a[@]}" -r $res --keep-fov -s "$ref_spp" --seed 99991 --exr "$ref" -f "$work/ref.png" >/dev/null
     declare -A err=() eff=()
     for combo in $(combos_of "$key"); do
-        IFS=, read -r sampler light sky <<<"$combo"
+        IFS=, read -r sampler light sky envs <<<"$combo"
         prev=""
         for spp in $spps; do
             total=0; times=()
             for ((s = 0; s < seeds; s++)); do
-                out="$("$pt" "${a[@]}" -r $res --keep-fov -s "$spp" --sampler "$sampler" --light-sampling "$light" --sky-sampling "$sky" --seed "$s" --exr "$work/x.exr" -f "$work/x.png")"
+                out="$("$pt" "${a[@]}" -r $res --keep-fov -s "$spp" --sampler "$sampler" --light-sampling "$light" --sky-sampling "$sky" --env-sampling "$envs" --seed "$s" --exr "$work/x.exr" -f "$work/x.png")"
                 times+=("$(sed -n 's/.*| render \([0-9.]*\) s |.*/\1/p' <<<"$out")")
                 e="$("$pt" compare "$ref" "$work/x.exr" | sed -n 's/.*relMSE \([0-9.e+-]*\) .*/\1/p')"
                 total="$(awk -v a="$total" -v b="$e" 'BEGIN { print a + b }')"
@@ -80,12 +81,12 @@ for key in "${keys[@]}"; do
             [[ -n "$prev" ]] && slope="$(awk -v a="$prev" -v b="$mse" 'BEGIN { printf "%.2f", log(b / a) / log(4) }')"
             prev="$mse"
             e_now="$(awk -v m="$mse" -v t="$sec" 'BEGIN { printf "%.4g", 1 / (m * t) }')"
-            if [[ "$combo" == "independent,area,uniform" ]]; then
+            if [[ "$combo" == "independent,area,uniform,map" ]]; then
                 err[$spp]="$mse"; eff[$spp]="$e_now"
             fi
             gain="$(awk -v a="${err[$spp]}" -v b="$mse" 'BEGIN { printf "%.2fx", a / b }')"
             egain="$(awk -v a="${eff[$spp]}" -v b="$e_now" 'BEGIN { printf "%.2fx", b / a }')"
-            printf '%-6s %-12s %-12s %-8s %5s %11s %7s %9s %11s %9s %9s\n' "$key" "$sampler" "$light" "$sky" "$spp" "$mse" "$slope" "$sec" "$e_now" "$gain" "$egain"
+            printf '%-6s %-12s %-12s %-8s %-8s %5s %11s %7s %9s %11s %9s %9s\n' "$key" "$sampler" "$light" "$sky" "$envs" "$spp" "$mse" "$slope" "$sec" "$e_now" "$gain" "$egain"
         done
     done
     unset err eff

@@ -29,8 +29,15 @@ fn uniform_env(l: Vec3) -> Arc<EnvMap> {
 
 #[allow(clippy::too_many_arguments)]
 fn render_env(scene: &Scene, cam: &Camera, env: Arc<EnvMap>, backend: BackendKind, m: u32, hemisphere: bool, rr: bool, spp: u32, seed: u64) -> RenderOutput {
+    render_env_sampled(scene, cam, env, backend, m, hemisphere, rr, spp, seed, true)
+}
+
+/// `render_env` with the environment sampled by the map × cosine bound
+/// (`product`, the default) or by the map alone.
+#[allow(clippy::too_many_arguments)]
+fn render_env_sampled(scene: &Scene, cam: &Camera, env: Arc<EnvMap>, backend: BackendKind, m: u32, hemisphere: bool, rr: bool, spp: u32, seed: u64, product: bool) -> RenderOutput {
     let accel = common::build(backend, &scene.shapes);
-    let lights = Lights::with_environment(scene, Some(env)).unwrap();
+    let lights = Lights::with_environment(scene, Some(env)).unwrap().with_env_product(product);
     let integ = PathTracer { scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate: true, hemisphere, light_samples: 1, russian_roulette: rr };
     render::render(cam, &integ, &RenderSettings::new(cam.screen_w, cam.screen_h, spp, seed))
 }
@@ -166,8 +173,9 @@ fn environment_light_on_a_diffuse_plane_matches_quadrature_of_the_map() {
     // An up-facing diffuse plane (albedo ρ) lit by the map reflects
     // ρ/π ∫_{y>0} L(ω) cos θ dω everywhere (direct light, -m 1). The
     // integral is computed by quadrature of the bilinear lookup; the render
-    // uses importance sampling (with MIS), and uniform hemisphere sampling
-    // (-H) for a second, independent estimate.
+    // uses importance sampling (with MIS) by the map × cosine bound and by
+    // the map alone, and uniform hemisphere sampling (-H) for a third,
+    // independent estimate.
     let env = test_sky();
     let (nx, ny) = (2048usize, 1024usize);
     let mut e = glam::DVec3::ZERO;
@@ -193,15 +201,15 @@ fn environment_light_on_a_diffuse_plane_matches_quadrature_of_the_map() {
     let sky = LightDesc { name: "Hemi".into(), kind: LightKind::Ambient, radiance: lh, transform: glam::Mat4::IDENTITY };
     let scene = scene_of(vec![(Shape::Mesh(plane), material("plane", Bsdf::Diffuse { albedo: Vec3::splat(rho) }))], vec![sky]);
     let cam = camera_looking(&scene, Vec3::new(0.0, 1.0, 0.0), -Vec3::Y, 20.0, 16);
-    let z = z_crit(0.01, 6);
-    for (hemi, spp) in [(false, 256u32), (true, 16384)] {
-        let out = render_env(&scene, &cam, env.clone(), BackendKind::Native, 1, hemi, true, spp, 5);
+    let z = z_crit(0.01, 9);
+    for (hemi, spp, product) in [(false, 256u32, true), (false, 256, false), (true, 16384, true)] {
+        let out = render_env_sampled(&scene, &cam, env.clone(), BackendKind::Native, 1, hemi, true, spp, 5, product);
         let n = out.image.pixels.len() as f64;
         for c in 0..3 {
             let mean: f64 = out.image.pixels.iter().map(|p| p[c] as f64).sum::<f64>() / n;
             let se = out.variance.pixels.iter().map(|v| v[c] as f64).sum::<f64>().sqrt() / n;
-            assert!(se < 0.01 * expected[c], "-H={hemi}: too little power: se {se} for {}", expected[c]);
-            assert!((mean - expected[c]).abs() <= z * se + 1e-4 * expected[c], "-H={hemi} channel {c}: {mean} ± {se} vs quadrature {}", expected[c]);
+            assert!(se < 0.01 * expected[c], "-H={hemi} product={product}: too little power: se {se} for {}", expected[c]);
+            assert!((mean - expected[c]).abs() <= z * se + 1e-4 * expected[c], "-H={hemi} product={product} channel {c}: {mean} ± {se} vs quadrature {}", expected[c]);
         }
     }
 }

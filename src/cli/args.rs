@@ -152,6 +152,11 @@ pub struct RenderArgs {
     /// with MIS
     #[arg(long, value_enum, default_value_t = SkySamplingArg::Lune)]
     pub sky_sampling: SkySamplingArg,
+    /// How the environment map (-e) is sampled at reflecting vertices: by
+    /// the map times a bound of the receiver's cosine (`light::env_product`),
+    /// or by the map alone (Cycles' and Mitsuba's way, for A/B comparisons)
+    #[arg(long, value_enum, default_value_t = EnvSamplingArg::Product)]
+    pub env_sampling: EnvSamplingArg,
     /// Also write the linear radiance as OpenEXR
     #[arg(long, value_name = "FILE")]
     pub exr: Option<PathBuf>,
@@ -196,6 +201,14 @@ pub enum SkySamplingArg {
     Lune,
     /// Uniform directions over the sky, with MIS (CS184's kind; for A/B comparisons)
     Uniform,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum EnvSamplingArg {
+    /// The map times a conservative bound of the receiver's cosine, per bin of normals
+    Product,
+    /// The map's luminance alone
+    Map,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

@@ -32,6 +32,7 @@
 //! texel's integral had 1.8x the variance of Cycles 3.4 per sample; see the
 //! README.
 
+use super::env_product::EnvProduct;
 use crate::error::Result;
 use crate::render::illuminance;
 use glam::Vec3;
@@ -52,14 +53,16 @@ pub struct EnvMap {
     pub texels: Vec<Vec3>,
     /// Cumulative probabilities of the h + 1 patch rows (length h + 2,
     /// from 0 to 1).
-    row_cdf: Vec<f64>,
+    pub(super) row_cdf: Vec<f64>,
     /// Per patch row, cumulative probabilities of its w patches within the
     /// row (w + 1 each).
-    col_cdf: Vec<f64>,
+    pub(super) col_cdf: Vec<f64>,
     /// Probability of each patch ((h + 1) × w, row-major).
-    prob: Vec<f64>,
+    pub(super) prob: Vec<f64>,
     /// Luminance of each texel (the corners of the patches).
     lum: Vec<f64>,
+    /// The map × cosine-bound tables (`env_product`).
+    pub product: Option<EnvProduct>,
 }
 
 impl EnvMap {
@@ -89,7 +92,7 @@ impl EnvMap {
     pub fn from_texels(path: String, width: usize, height: usize, texels: Vec<Vec3>) -> EnvMap {
         let (w, h) = (width, height);
         let lum: Vec<f64> = texels.iter().map(|&t| illuminance(t.max(Vec3::ZERO)) as f64).collect();
-        let mut map = EnvMap { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)], lum };
+        let mut map = EnvMap { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)], lum, product: None };
         let mut weight = vec![0.0f64; w * (h + 1)];
         for q in 0..=h {
             let (y0, y1) = map.patch_rows(q);
@@ -112,13 +115,14 @@ impl EnvMap {
                 }
             }
             map.row_cdf[h + 1] = 1.0;
+            map.product = Some(EnvProduct::build(&map));
         }
         map
     }
 
     /// The y range (texel units) of patch row q: half a row above the first
     /// texel centres, whole rows between centres, half a row below the last.
-    fn patch_rows(&self, q: usize) -> (f64, f64) {
+    pub(super) fn patch_rows(&self, q: usize) -> (f64, f64) {
         let h = self.height as f64;
         match q {
             0 => (0.0, 0.5),
@@ -198,12 +202,17 @@ impl EnvMap {
 
     /// Solid-angle pdf of `sample` for direction `d`.
     pub fn pdf(&self, d: Vec3) -> f32 {
+        self.pdf_with_patch(d).map_or(0.0, |(_, _, pdf)| pdf)
+    }
+
+    /// `pdf`, with the patch (p, q) the direction falls in.
+    pub(super) fn pdf_with_patch(&self, d: Vec3) -> Option<(usize, usize, f32)> {
         if self.is_black() {
-            return 0.0;
+            return None;
         }
         let (x, y, sin_t) = self.texel_coords(d);
         let (p, q, s, t) = self.patch_at(x, y);
-        self.patch_pdf(p, q, s, t, sin_t.max(POLE_SIN))
+        Some((p, q, self.patch_pdf(p, q, s, t, sin_t.max(POLE_SIN))))
     }
 
     /// The solid-angle pdf of the point (s, t) of patch (p, q), at sin θ.
@@ -240,6 +249,13 @@ impl EnvMap {
         let p = (cdf.partition_point(|&c| c <= u0) - 1).min(w - 1);
         let (c0, c1) = (cdf[p], cdf[p + 1]);
         let u_left = if c1 > c0 { ((u0 - c0) / (c1 - c0)).clamp(0.0, 1.0) } else { 0.5 };
+        self.sample_in_patch(p, q, u_left, v_left)
+    }
+
+    /// A point of patch (p, q) with density ∝ the bilinear luminance, from
+    /// two uniforms; its direction, radiance and the map's pdf.
+    pub(super) fn sample_in_patch(&self, p: usize, q: usize, u_left: f64, v_left: f64) -> Option<(Vec3, Vec3, f32)> {
+        let w = self.width;
         if !(self.prob[q * w + p] > 0.0) {
             return None;
         }

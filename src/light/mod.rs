@@ -23,6 +23,7 @@
 //!   solid angle where that pays (`spherical_triangle`), else by area.
 //!   `pdf_hit` applies the same choice.
 
+pub mod env_product;
 pub mod environment;
 pub mod lune;
 pub mod sphere_cone;
@@ -318,6 +319,9 @@ pub struct Lights {
     pub of_geometry: Vec<Option<usize>>,
     /// One line per merge or notable decision, printed by the CLI.
     pub notes: Vec<String>,
+    /// Sample the environment map × the receiver's cosine bound at
+    /// vertices that do not transmit (`env_product`); else the map alone.
+    pub env_product: bool,
 }
 
 impl Lights {
@@ -327,7 +331,7 @@ impl Lights {
 
     /// The scene's lights plus an environment map (`-e`).
     pub fn with_environment(scene: &Scene, env: Option<Arc<EnvMap>>) -> Result<Lights> {
-        let mut out = Lights { of_geometry: vec![None; scene.shapes.len()], ..Lights::default() };
+        let mut out = Lights { of_geometry: vec![None; scene.shapes.len()], env_product: true, ..Lights::default() };
         // Emissive shapes first.
         for (g, shape) in scene.shapes.iter().enumerate() {
             let radiance = scene.material_of(g as u32).emission;
@@ -418,6 +422,13 @@ impl Lights {
     /// measurements (`--light-sampling area`, `--sky-sampling uniform`):
     /// rectangles and spheres by area (`area`), the hemisphere light
     /// uniformly with MIS at every vertex (`uniform_sky`).
+    /// `with_sampling`'s switch for the environment map: `product` = the
+    /// map × cosine bound (`env_product`), else the map alone.
+    pub fn with_env_product(mut self, product: bool) -> Lights {
+        self.env_product = product;
+        self
+    }
+
     pub fn with_sampling(mut self, area: bool, uniform_sky: bool) -> Lights {
         for l in &mut self.lights {
             match l {

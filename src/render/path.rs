@@ -117,6 +117,13 @@ impl PathTracer<'_> {
         !self.hemisphere && matches!(bsdf, Bsdf::Diffuse(_))
     }
 
+    /// The normal the environment light is sampled for at `v` (the shading
+    /// normal), where it is sampled by the map × cosine bound: with
+    /// `env_product` on, and a BSDF that does not transmit.
+    pub(super) fn env_normal(&self, bsdf: &Bsdf, v: &Vertex) -> Option<Vec3> {
+        (self.lights.env_product && !self.hemisphere && !bsdf.transmits()).then_some(v.ns)
+    }
+
     /// What a BSDF sample that escaped along `c.wi` sees: each escaping
     /// light's radiance (hemisphere, environment) weighted against that
     /// light's own samples, since each light is sampled on its own.
@@ -131,7 +138,11 @@ impl PathTracer<'_> {
                 } else if le == Vec3::ZERO || c.delta {
                     le
                 } else {
-                    le * power_heuristic(c.pdf, self.light_samples as f32 * l.pdf_escape(c.wi))
+                    let pl = match (l, c.env_normal) {
+                        (crate::light::Light::Environment(e), Some(n)) => e.product.as_ref().map_or(0.0, |pr| pr.pdf(e, n, c.wi)),
+                        _ => l.pdf_escape(c.wi),
+                    };
+                    le * power_heuristic(c.pdf, self.light_samples as f32 * pl)
                 }
             })
             .sum()
@@ -231,6 +242,10 @@ pub(super) struct Continuation {
     /// The product of the path's radiance scalings (η²) so far, which
     /// Russian roulette divides out of `beta`.
     pub radiance_scale: f32,
+    /// The vertex's shading normal where it sampled the environment by
+    /// the map × cosine bound (`PathTracer::env_normal`): this ray's
+    /// escape is weighted against that pdf.
+    pub env_normal: Option<Vec3>,
 }
 
 /// Veach's power heuristic (beta = 2) for a sample of pdf `a` against `b`,
