@@ -150,8 +150,8 @@ impl EnvProduct {
         (self.col_start.len() - 1) * (self.row_start.len() - 1)
     }
 
-    /// The pdf of `sample` at a receiver with unit normal `n`, given the
-    /// map's own pdf `env_pdf` of direction `d` (patch (p, q)).
+    /// What the map's own pdf is multiplied by for a direction in patch
+    /// (p, q), at a receiver in normal bin `b`: the tile's bound / Z_b.
     fn scale(&self, b: usize, p: usize, q: usize) -> f64 {
         let tx = self.col_start.len() - 1;
         let k = self.tile_row[q] as usize * tx + self.tile_col[p] as usize;

@@ -177,11 +177,15 @@ impl Light {
         }
     }
 
-    /// Solid-angle pdf of `sample` for an escaping direction (hemisphere light).
-    pub fn pdf_escape(&self, dir: Vec3) -> f32 {
+    /// Solid-angle pdf of `sample` for an escaping direction (hemisphere
+    /// light, environment map), with the same `env_normal` as `sample`.
+    pub fn pdf_escape(&self, dir: Vec3, env_normal: Option<Vec3>) -> f32 {
         match self {
             Light::Hemisphere { .. } if dir.y > 0.0 => UNIFORM_HEMISPHERE_PDF,
-            Light::Environment(e) => e.pdf(dir),
+            Light::Environment(e) => match env_normal {
+                Some(n) => e.product.as_ref().map_or(0.0, |pr| pr.pdf(e, n, dir)),
+                None => e.pdf(dir),
+            },
             _ => 0.0,
         }
     }
@@ -192,9 +196,12 @@ impl Light {
     }
 
     /// Sample light arriving at `p`. `u` are two uniforms, `u_sel` a third
-    /// (triangle selection). `None` when the sample carries no light (the
-    /// back of a one-sided emitter, a degenerate configuration).
-    pub fn sample(&self, scene: &Scene, p: Vec3, u: (f32, f32), u_sel: f32) -> Option<LightSample> {
+    /// (triangle selection). An environment map is sampled by the map ×
+    /// the cosine bound of a receiver with shading normal `env_normal`
+    /// (`env_product`) where one is given, else by the map alone. `None`
+    /// when the sample carries no light (the back of a one-sided emitter, a
+    /// degenerate configuration).
+    pub fn sample(&self, scene: &Scene, p: Vec3, u: (f32, f32), u_sel: f32, env_normal: Option<Vec3>) -> Option<LightSample> {
         match self {
             Light::Point { position, intensity } => {
                 let d = *position - p;
@@ -260,7 +267,10 @@ impl Light {
                 area_sample(p, q, n, mag, *radiance, 1.0 / (4.0 * PI * radius * radius))
             }
             Light::Environment(e) => {
-                let (wi, value, pdf) = e.sample(u)?;
+                let (wi, value, pdf) = match env_normal {
+                    Some(n) => e.product.as_ref()?.sample(e, n, u)?,
+                    None => e.sample(u)?,
+                };
                 Some(LightSample { wi, value, pdf, target: Target::Infinite, covers: false, prim: 0 })
             }
         }
@@ -422,13 +432,6 @@ impl Lights {
     /// measurements (`--light-sampling area`, `--sky-sampling uniform`):
     /// rectangles and spheres by area (`area`), the hemisphere light
     /// uniformly with MIS at every vertex (`uniform_sky`).
-    /// `with_sampling`'s switch for the environment map: `product` = the
-    /// map × cosine bound (`env_product`), else the map alone.
-    pub fn with_env_product(mut self, product: bool) -> Lights {
-        self.env_product = product;
-        self
-    }
-
     pub fn with_sampling(mut self, area: bool, uniform_sky: bool) -> Lights {
         for l in &mut self.lights {
             match l {
@@ -439,6 +442,13 @@ impl Lights {
                 _ => {}
             }
         }
+        self
+    }
+
+    /// `with_sampling`'s switch for the environment map (`--env-sampling`):
+    /// `product` = the map × cosine bound (`env_product`), else the map alone.
+    pub fn with_env_product(mut self, product: bool) -> Lights {
+        self.env_product = product;
         self
     }
 

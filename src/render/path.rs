@@ -138,11 +138,7 @@ impl PathTracer<'_> {
                 } else if le == Vec3::ZERO || c.delta {
                     le
                 } else {
-                    let pl = match (l, c.env_normal) {
-                        (crate::light::Light::Environment(e), Some(n)) => e.product.as_ref().map_or(0.0, |pr| pr.pdf(e, n, c.wi)),
-                        _ => l.pdf_escape(c.wi),
-                    };
-                    le * power_heuristic(c.pdf, self.light_samples as f32 * pl)
+                    le * power_heuristic(c.pdf, self.light_samples as f32 * l.pdf_escape(c.wi, c.env_normal))
                 }
             })
             .sum()

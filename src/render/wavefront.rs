@@ -181,7 +181,7 @@ impl PathTracer<'_> {
         let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return true };
         let explicit = self.lights.lights.iter().enumerate().filter(|(_, l)| !self.hemisphere || !l.is_visible());
         let alone = self.alone(&bsdf);
-        let product = self.env_normal(&bsdf, v);
+        let env_normal = self.env_normal(&bsdf, v);
         let mut bsdf_finds_light = self.hemisphere;
         for (li, light) in explicit {
             let n = if light.is_delta() { 1 } else { self.light_samples };
@@ -198,13 +198,7 @@ impl PathTracer<'_> {
                     Light::Hemisphere { radiance, .. } if lune => {
                         lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true, prim: 0 })
                     }
-                    // The map × the cosine bound where the BSDF only reflects.
-                    Light::Environment(e) if product.is_some() => e
-                        .product
-                        .as_ref()
-                        .and_then(|pr| pr.sample(e, v.ns, u))
-                        .map(|(wi, value, pdf)| LightSample { wi, value, pdf, target: Target::Infinite, covers: false, prim: 0 }),
-                    _ => light.sample(self.scene, v.it.p, u, u_sel),
+                    _ => light.sample(self.scene, v.it.p, u, u_sel, env_normal),
                 };
                 // Sampled alone: the BSDF sample need not look for it.
                 let by_itself = alone && s.is_some_and(|s| s.covers);

@@ -151,7 +151,7 @@ impl RaysSoA {
         let finite = |x: __m256| _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(x, abs), inf);
         // Per half: the fields, then the derived registers kept for the
         // reductions.
-        let mut keep = [[zero; 2]; 16];
+        let mut keep = [[zero; 2]; 13];
         let mut inv_ok = u32::MAX;
         for half in 0..2 {
             let b = half * 8;
