@@ -305,7 +305,7 @@ mod tests {
                     .collect()
             };
             let (pm, pv) = stats(&draw(true));
-            let (mm, mv) = stats(&draw(false));
+            let (_, mv) = stats(&draw(false));
             let (um, uv) = stats(&uni);
             let se = (pv / 100_000.0 + uv / 400_000.0).sqrt();
             assert!((pm - um).abs() < 4.0 * se, "n {n:?}: product mean {pm} vs uniform {um} (se {se})");
