@@ -50,9 +50,10 @@ pub enum Light {
     /// directions; `lune`: sampled by the lune at diffuse vertices.
     Hemisphere { radiance: Vec3, lune: bool },
     /// A one-sided rectangle `corner + s*ex + t*ey`, s,t in [0,1], emitting
-    /// towards `normal`; sampled by solid angle where it subtends enough
-    /// (`solid_angle`), else by area.
-    Rect { corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3, radiance: Vec3, solid_angle: bool },
+    /// towards `normal`; sampled by solid angle (`solid_angle`: the
+    /// rectangle as `RectEmitter`, when its edges are orthogonal and that
+    /// sampling is on) where it subtends enough, else by area.
+    Rect { corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3, radiance: Vec3, solid_angle: Option<RectEmitter> },
     /// The triangles of an emissive mesh: when they form one rectangle
     /// (`rect`), sampled by solid angle where it subtends enough; else a
     /// triangle picked by area, then sampled by its solid angle where that
@@ -228,7 +229,7 @@ impl Light {
                 Some(LightSample { wi, value: *radiance, pdf: UNIFORM_HEMISPHERE_PDF, target: Target::Infinite, covers: false, prim: 0 })
             }
             Light::Rect { corner, ex, ey, normal, radiance, solid_angle } => {
-                if let Some(sr) = RectEmitter::new(*corner, *ex, *ey, *normal).filter(|_| *solid_angle).and_then(|r| r.from(p)) {
+                if let Some(sr) = solid_angle.and_then(|r| r.from(p)) {
                     return solid_angle_sample(p, sr.sample(u), *normal, magnitude(&[*corner, *corner + *ex + *ey]), *radiance, 1.0 / sr.omega);
                 }
                 let area = ex.cross(*ey).length();
@@ -414,7 +415,7 @@ impl Lights {
                         ));
                     }
                     let corner = pos - 0.5 * dx - 0.5 * dy;
-                    out.lights.push(Light::Rect { corner, ex: dx, ey: dy, normal: dir, radiance: l.radiance, solid_angle: true });
+                    out.lights.push(Light::Rect { corner, ex: dx, ey: dy, normal: dir, radiance: l.radiance, solid_angle: RectEmitter::new(corner, dx, dy, dir) });
                 }
             }
         }
@@ -436,7 +437,7 @@ impl Lights {
         for l in &mut self.lights {
             match l {
                 Light::Mesh { rect, spherical, .. } if area => (*rect, *spherical) = (None, false),
-                Light::Rect { solid_angle, .. } if area => *solid_angle = false,
+                Light::Rect { solid_angle, .. } if area => *solid_angle = None,
                 Light::Sphere { cone, .. } if area => *cone = false,
                 Light::Hemisphere { lune, .. } if uniform_sky => *lune = false,
                 _ => {}

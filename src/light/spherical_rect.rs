@@ -58,7 +58,13 @@ impl SphericalRect {
         let (a, b) = (ex.length(), ey.length());
         let x = ex / a;
         let y = ey / b;
-        let mut z = x.cross(y);
+        SphericalRect::framed(o, corner, Frame { x, y, z: x.cross(y), a, b })
+    }
+
+    /// `new` with the rectangle's unit edges, normal and edge lengths
+    /// computed once per emitter (`RectEmitter`) instead of once per sample.
+    fn framed(o: Vec3, corner: Vec3, f: Frame) -> Option<SphericalRect> {
+        let Frame { x, y, mut z, a, b } = f;
         let d = corner - o;
         let mut z0 = d.dot(z);
         if z0 > 0.0 {
@@ -233,14 +239,29 @@ pub struct RectEmitter {
     pub ex: Vec3,
     pub ey: Vec3,
     pub normal: Vec3,
+    frame: Frame,
+}
+
+/// A rectangle's unit edges `x`, `y`, their normal `z = x × y` and the edge
+/// lengths `a`, `b`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Frame {
+    x: Vec3,
+    y: Vec3,
+    z: Vec3,
+    a: f32,
+    b: f32,
 }
 
 impl RectEmitter {
     /// `corner`, `ex`, `ey` as a rectangle, if the edges are orthogonal
     /// (to 1e-5 of their lengths' product).
     pub fn new(corner: Vec3, ex: Vec3, ey: Vec3, normal: Vec3) -> Option<RectEmitter> {
-        let scale = ex.length() * ey.length();
-        (scale > 0.0 && scale.is_finite() && ex.dot(ey).abs() <= 1e-5 * scale).then_some(RectEmitter { corner, ex, ey, normal })
+        let (a, b) = (ex.length(), ey.length());
+        let scale = a * b;
+        let (x, y) = (ex / a, ey / b);
+        let frame = Frame { x, y, z: x.cross(y), a, b };
+        (scale > 0.0 && scale.is_finite() && ex.dot(ey).abs() <= 1e-5 * scale).then_some(RectEmitter { corner, ex, ey, normal, frame })
     }
 
     /// The rectangle two triangles form: four distinct corners, the two
@@ -272,7 +293,7 @@ impl RectEmitter {
         if !(self.normal.dot(p - self.corner) > 0.0) {
             return None;
         }
-        SphericalRect::new(p, self.corner, self.ex, self.ey)
+        SphericalRect::framed(p, self.corner, self.frame)
     }
 }
 

@@ -135,31 +135,38 @@ impl PathTracer<'_> {
             self.accel.intersect_batch(&closest, &mut found);
             // Add what the rays found, in the path-at-a-time order.
             for p in paths.iter_mut() {
-                let Some(v) = p.v.take() else { continue };
+                // The vertex stays in place until its successor replaces it
+                // (moving it out and back was 5 % of a CBspheres render in
+                // memcpy).
+                let Some(v) = &p.v else { continue };
                 if p.counted {
                     p.l += p.beta * self.replay(&terms[p.terms.clone()], &occluded, &closest, &found);
                 }
-                let Some((k, c)) = p.next else { continue };
-                let gather = p.counted && (!self.hemisphere || c.delta);
-                let Some(next) = found[k].map(|h| Interaction::with_barycentrics(self.scene, &closest[k], &h, self.accel.exact_barycentrics())) else {
+                let next = p.next.and_then(|(k, c)| {
+                    let gather = p.counted && (!self.hemisphere || c.delta);
+                    let Some(next) = found[k].map(|h| Interaction::with_barycentrics(self.scene, &closest[k], &h, self.accel.exact_barycentrics())) else {
+                        if gather {
+                            p.l += c.beta * self.escaped_weighted(&c);
+                        }
+                        return None;
+                    };
                     if gather {
-                        p.l += c.beta * self.escaped_weighted(&c);
+                        let le = emitted(self.scene, &next, -c.wi);
+                        if le != Vec3::ZERO {
+                            p.l += c.beta * le * self.bsdf_weight_hit(v, &next, &c);
+                        }
                     }
-                    continue;
-                };
-                if gather {
-                    let le = emitted(self.scene, &next, -c.wi);
-                    if le != Vec3::ZERO {
-                        p.l += c.beta * le * self.bsdf_weight_hit(&v, &next, &c);
+                    (p.bounce < m).then_some((next, c))
+                });
+                match next {
+                    Some((next, c)) => {
+                        p.v = Some(self.vertex(next, -c.wi));
+                        p.beta = c.beta;
+                        p.radiance_scale = c.radiance_scale;
+                        p.bounce += 1;
                     }
+                    None => p.v = None,
                 }
-                if p.bounce == m {
-                    continue;
-                }
-                p.v = Some(self.vertex(next, -c.wi));
-                p.beta = c.beta;
-                p.radiance_scale = c.radiance_scale;
-                p.bounce += 1;
             }
         }
         for (o, p) in out.iter_mut().zip(&paths) {

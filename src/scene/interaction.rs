@@ -55,10 +55,14 @@ impl Interaction {
                     intersect_triangle(&rt, a, b, c, ray.tmin, ray.tmax).map_or((hit.u, hit.v), |(_, u, v)| (u, v))
                 };
                 let mag = magnitude(&[a, b, c]);
-                let (u, v) = away_from_edges(a, b, c, u, v, mag);
+                // One f64 edge cross product for both the face normal and
+                // the area (`face_normal` and `area` each compute it).
+                let cross = crate::geometry::triangle::edge_cross(a, b, c);
+                let twice_area = 2.0 * (0.5 * cross.length()) as f32;
+                let (u, v) = away_from_edges(a, b, c, u, v, mag, twice_area);
                 let w = 1.0 - u - v;
                 let p = a * w + b * u + c * v;
-                let ng = crate::geometry::face_normal(a, b, c);
+                let ng = cross.normalize_or_zero().as_vec3();
                 let [na, nb, nc] = tri.map(|i| m.normals[i as usize]);
                 let ns = (na * w + nb * u + nc * v).normalize_or_zero();
                 (p, ng, if ns == Vec3::ZERO { ng } else { ns }, mag)
@@ -84,16 +88,25 @@ const EDGE_ULPS: f32 = 4.0;
 /// parallel to the neighbour). Measured: a sealed room 2000 units from the
 /// origin leaked light through its edges at 64 spp. Points farther from the
 /// edges do not move, so shading elsewhere is unchanged.
-fn away_from_edges(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32, magnitude: f32) -> (f32, f32) {
+fn away_from_edges(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32, magnitude: f32, twice_area: f32) -> (f32, f32) {
     let step = EDGE_ULPS * ulp(magnitude);
-    let twice_area = 2.0 * crate::geometry::triangle::area(a, b, c);
+    let w = 1.0 - u - v;
+    // Most hits lie far inside: u·2A ≥ step·|edge| with a margin far above
+    // the rounding of either side (compared squared in f64, no square roots
+    // and no overflow) proves u ≥ the bound below, whatever it rounds to.
+    let clear = |bary: f32, p: Vec3, q: Vec3| {
+        let lhs = bary as f64 * twice_area as f64;
+        bary > 0.0 && lhs * lhs >= 1.0001 * (step as f64 * step as f64) * (q - p).as_dvec3().length_squared()
+    };
+    if clear(u, c, a) && clear(v, a, b) && clear(w, b, c) {
+        return (u, v);
+    }
     // Barycentric of a vertex = distance to the opposite edge / that height.
     let min_bary = |p: Vec3, q: Vec3| {
         let edge = (q - p).length();
         if twice_area > 0.0 && edge > 0.0 { (step * edge / twice_area).min(1.0 / 3.0) } else { 0.0 }
     };
     let (mu, mv, mw) = (min_bary(c, a), min_bary(a, b), min_bary(b, c));
-    let w = 1.0 - u - v;
     if u >= mu && v >= mv && w >= mw {
         return (u, v);
     }
