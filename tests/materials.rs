@@ -245,3 +245,54 @@ fn mirror_at_one_bounce_shows_the_light_it_reflects() {
     }
     assert!(bright > 0, "no mirror pixel reflects the light at -m 1");
 }
+
+/// CBspheres (mirror and glass spheres) and CBspheres_lambertian at
+/// `-m 5`, with diffuse bounces partly aimed at the specular spheres
+/// (`fraction`) or by the cosine alone (0).
+fn cb_guided(name: &str, fraction: f32, spp: u32) -> RenderOutput {
+    let scene = common::load(&common::scene_path("sky", name));
+    let mut cam = Camera::from_scene(&scene);
+    cam.resize_keep_fov(48, 36);
+    let accel = common::build(BackendKind::Native, &scene.shapes);
+    let lights = Lights::from_scene(&scene).unwrap().with_specular_guide(&scene, fraction);
+    let integ = PathTracer { scene: &scene, accel: accel.as_ref(), lights: &lights, max_depth: 5, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+    render::render(&cam, &integ, &RenderSettings::new(48, 36, spp, 3))
+}
+
+#[test]
+fn aiming_diffuse_bounces_at_specular_spheres_keeps_the_image_unbiased() {
+    // The guided mixture changes every path that bounces off a diffuse
+    // surface, so the two images differ pixel by pixel; their means must
+    // agree within the renders' own standard errors: the whole image and
+    // each of 12 blocks of 12x12 pixels (Šidák over 13 tests).
+    let (guided, cosine) = (cb_guided("CBspheres", 0.2, 512), cb_guided("CBspheres", 0.0, 512));
+    assert_ne!(guided.image.pixels, cosine.image.pixels, "the guide changed nothing: is it active?");
+    let z = z_crit(1e-3, 13);
+    let (w, h) = (48usize, 36usize);
+    let block_z = |x0: usize, y0: usize, bw: usize, bh: usize| {
+        let (mut diff, mut var) = (0.0f64, 0.0f64);
+        for y in y0..y0 + bh {
+            for x in x0..x0 + bw {
+                let i = y * w + x;
+                let (a, b) = (guided.image.pixels[i], cosine.image.pixels[i]);
+                let (va, vb) = (guided.variance.pixels[i], cosine.variance.pixels[i]);
+                // One channel: the three share their paths, so their
+                // variances would not add.
+                diff += (a.y - b.y) as f64;
+                var += (va.y + vb.y) as f64;
+            }
+        }
+        diff / var.sqrt()
+    };
+    let whole = block_z(0, 0, w, h);
+    assert!(whole.abs() < z, "image mean: z = {whole:.2} (limit {z:.2})");
+    for by in 0..3 {
+        for bx in 0..4 {
+            let zb = block_z(bx * 12, by * 12, 12, 12);
+            assert!(zb.abs() < z, "block ({bx}, {by}): z = {zb:.2} (limit {z:.2})");
+        }
+    }
+    // Without mirror, glass or metal spheres there is nothing to aim at:
+    // the image is the cosine-only one, bit for bit.
+    assert_eq!(cb_guided("CBspheres_lambertian", 0.2, 16).image.pixels, cb_guided("CBspheres_lambertian", 0.0, 16).image.pixels);
+}

@@ -161,6 +161,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             crate::bail!("{flag} applies to light transport; it has no effect with --integrator {}", a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default());
         }
     }
+    if !(0.0..0.95).contains(&a.specular_guide) {
+        crate::bail!("--specular-guide {}: the share of guided bounce rays must be a number in [0, 0.95)", a.specular_guide);
+    }
     let light_samples = a.light_samples.unwrap_or(1);
     if light_samples == 0 || light_samples > 1 << 16 {
         crate::bail!("-l {light_samples}: samples per light must be between 1 and 65536");
@@ -189,7 +192,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let lights = match a.integrator {
         IntegratorKind::Path => {
             check_materials(&scene)?;
-            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_product(a.env_sampling == EnvSamplingArg::Product);
+            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_product(a.env_sampling == EnvSamplingArg::Product).with_specular_guide(&scene, a.specular_guide);
             if l.lights.is_empty() {
                 // One line: the notes (a zero-radiance light dropped) go into it.
                 let why = if l.notes.is_empty() { String::new() } else { format!(" ({})", l.notes.join("; ")) };
@@ -412,6 +415,7 @@ fn partial_settings(
         kv("light_sampling", a.light_sampling.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("sky_sampling", a.sky_sampling.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("env_sampling", a.env_sampling.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
+        kv("specular_guide", a.specular_guide.to_string()),
         kv("adaptive", adaptive),
         kv("integrator", a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("max_depth", a.max_depth.unwrap_or(1).to_string()),

@@ -28,6 +28,7 @@ pub mod environment;
 pub mod lune;
 pub mod sphere_cone;
 pub mod spherical_rect;
+pub mod specular_guide;
 pub mod spherical_triangle;
 
 use spherical_rect::RectEmitter;
@@ -333,6 +334,9 @@ pub struct Lights {
     /// Sample the environment map × the receiver's cosine bound at
     /// vertices that do not transmit (`env_product`); else the map alone.
     pub env_product: bool,
+    /// Continuation rays of diffuse vertices partly aimed at the scene's
+    /// specular and glossy objects (`specular_guide`); `None`: cosine only.
+    pub guide: Option<specular_guide::SpecularGuide>,
 }
 
 impl Lights {
@@ -426,7 +430,7 @@ impl Lights {
                 out.lights.push(Light::Environment(e));
             }
         }
-        Ok(out)
+        Ok(out.with_specular_guide(scene, specular_guide::DEFAULT_FRACTION))
     }
 
     /// The CS184 sampling of every light instead of ours, for A/B
@@ -450,6 +454,16 @@ impl Lights {
     /// `product` = the map × cosine bound (`env_product`), else the map alone.
     pub fn with_env_product(mut self, product: bool) -> Lights {
         self.env_product = product;
+        self
+    }
+
+    /// Aim this share of diffuse vertices' continuation rays at the
+    /// scene's specular and glossy objects (`--specular-guide`; 0: none).
+    pub fn with_specular_guide(mut self, scene: &Scene, fraction: f32) -> Lights {
+        let (guide, note) = specular_guide::SpecularGuide::of_scene(scene, fraction);
+        self.guide = guide;
+        self.notes.retain(|n| !n.ends_with("(--specular-guide)"));
+        self.notes.extend(note);
         self
     }
 

@@ -15,10 +15,12 @@ use super::path::{Continuation, PathTracer, Vertex};
 use crate::accel::Hit;
 use crate::light::{emitted, lune, Light, LightSample, Target};
 use crate::ray::Ray;
+use crate::bsdf::{Bsdf, BsdfSample};
 use crate::sampler::{dim, Sampler};
-use crate::sampling::{uniform_hemisphere, UNIFORM_HEMISPHERE_PDF};
+use crate::sampling::{cosine_hemisphere, cosine_hemisphere_pdf, uniform_hemisphere, UNIFORM_HEMISPHERE_PDF};
 use crate::scene::Interaction;
 use glam::Vec3;
+use std::f32::consts::PI;
 
 /// Russian roulette is a weight window: a path whose throughput (its
 /// largest channel) is at least this goes on for sure; a darker one goes on
@@ -293,8 +295,13 @@ impl PathTracer<'_> {
         let (lobe, dir) = bsdf.draws();
         let lobe = if lobe { sampler.slot_1d(dim::BSDF_LOBE, 0) } else { 0.0 };
         let u = if dir { sampler.slot_2d(dim::BSDF, 0) } else { (0.0, 0.0) };
-        let s = bsdf.sample_with(v.wo, lobe, u)?;
-        let wi = v.frame.to_world(s.wi);
+        let (s, wi) = match self.guided(v, &bsdf, last, sampler, u) {
+            Some(guided) => guided?,
+            None => {
+                let s = bsdf.sample_with(v.wo, lobe, u)?;
+                (s, v.frame.to_world(s.wi))
+            }
+        };
         // With shading normals a sampled direction can leave on the other
         // side of the face than its lobe says. A reflecting surface then
         // ends the path: the ray would start inside the object (a leak into
@@ -318,5 +325,40 @@ impl PathTracer<'_> {
             beta_next /= q;
         }
         Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale, alone: self.alone(&bsdf), env_normal: self.env_normal(&bsdf, v) })
+    }
+
+    /// A diffuse vertex's continuation from the mixture of its cosine lobe
+    /// and cones towards the scene's specular and glossy spheres
+    /// (`light::specular_guide`): `None` where the guide does not apply
+    /// (not diffuse, `-H`, the path's last vertex, no guide or no target in
+    /// view), else the sample (`Some(None)`: the direction is below the
+    /// surface). The lobe's slot picks the strategy and the target (diffuse
+    /// sampling does not use it), the direction's slot draws the direction
+    /// either way.
+    fn guided(&self, v: &Vertex, bsdf: &Bsdf, last: bool, sampler: &mut Sampler, u: (f32, f32)) -> Option<Option<(BsdfSample, Vec3)>> {
+        let Bsdf::Diffuse(d) = bsdf else { return None };
+        let guide = self.lights.guide.as_ref().filter(|_| !self.hemisphere && !last)?;
+        let at = guide.at(v.it.p, v.ns);
+        let q = at.fraction();
+        if q == 0.0 {
+            return None;
+        }
+        let pick = sampler.slot_1d(dim::BSDF_LOBE, 0);
+        let (wi, from) = if pick < q {
+            let Some((wi, k)) = at.sample(pick / q, u) else { return Some(None) };
+            (wi, Some(k))
+        } else {
+            (v.frame.to_world(cosine_hemisphere(u.0, u.1)), None)
+        };
+        let local = v.frame.to_local(wi);
+        if !(local.z > 0.0) {
+            return Some(None);
+        }
+        let pdf = (1.0 - q) * cosine_hemisphere_pdf(local.z) + q * at.pdf(wi, from);
+        if !(pdf > 0.0) || !pdf.is_finite() {
+            return Some(None);
+        }
+        let weight = d.albedo * (local.z / PI / pdf);
+        Some(Some((BsdfSample { wi: local, weight, pdf, delta: false, radiance_scale: 1.0 }, wi)))
     }
 }
