@@ -158,10 +158,11 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value_t = EnvSamplingArg::Product)]
     pub env_sampling: EnvSamplingArg,
     /// Share of a diffuse surface's bounce rays aimed at the scene's mirror,
-    /// glass and metal spheres (a mixture with the cosine lobe, weighted by
-    /// its pdf: unbiased), so that caustics through them are found more
-    /// often; 0 for the cosine lobe alone (CS184's, Cycles' and Mitsuba's
-    /// way). Up to 16 spheres; meshes are not aimed at (`light::specular_guide`)
+    /// glass and metal objects reflecting at least half the light (a
+    /// mixture with the cosine lobe, weighted by its pdf: unbiased), so that
+    /// caustics through them are found more often; 0 for the cosine lobe
+    /// alone (CS184's, Cycles' and Mitsuba's way). Up to 16 objects
+    /// (`light::specular_guide`)
     #[arg(long, value_name = "FRACTION", default_value_t = crate::light::specular_guide::DEFAULT_FRACTION)]
     pub specular_guide: f32,
     /// Also write the linear radiance as OpenEXR

@@ -3,9 +3,11 @@
 //! surface through a mirror, glass or a glossy metal) are found by more
 //! than the few cosine samples that happen to hit those objects.
 //!
-//! Model: the *targets* are the scene's spheres whose material reflects or
-//! transmits non-diffusely (mirror, glass, CS184 refraction, microfacet).
-//! At a diffuse vertex the continuation direction comes from the
+//! Model: the *targets* are the scene's objects whose material reflects or
+//! transmits non-diffusely (mirror, glass, CS184 refraction, microfacet)
+//! with a brightest channel of at least `MIN_ALBEDO`, each bounded by a
+//! sphere (a sphere by itself, a mesh by the sphere around its bounding
+//! box). At a diffuse vertex the continuation direction comes from the
 //! one-sample mixture
 //!
 //!   p(ω) = (1 − q) · cos θ / π + q · (1/n) Σ_k 1[ω ∈ cone_k] / Ω_k
@@ -14,18 +16,28 @@
 //! surface (`GuideAt`), with cone_k uniform in solid angle (`SphereCone`).
 //! The throughput weight is f cos / p and the MIS pdf of the ray is p, so
 //! the estimator is unbiased for any q < 1: the cosine part keeps every
-//! direction of the hemisphere sampled. Why it pays: in the Cornell boxes a
-//! sphere fills ~0.1 sr of a wall's view, so cosine sampling sends ~3 % of
-//! the rays at it and the light reflected or refracted through it arrives
-//! as rare, bright samples; in the harness's mirror-and-glass scenes these
-//! caustic paths (diffuse → specular chain → light) carried 82 % of the
-//! variance (CBspheres, measured by dropping them, 256×192, 256 spp).
+//! direction of the hemisphere sampled.
+//!
+//! Why it pays: in the Cornell boxes a sphere fills ~0.1 sr of a wall's
+//! view, so cosine sampling sends ~3 % of the rays at it, and the light
+//! reflected or refracted through it arrives as rare, bright samples; in
+//! CBspheres these caustic paths (diffuse → specular chain → light) carry
+//! 82 % of the variance (measured by dropping them: 256×192, 256 spp,
+//! relMSE 1.6e-3 → 2.8e-4). Measured (8 seeds × 64 spp, 256×192, 1
+//! thread, relMSE × time against q = 0, q = 0.2): CBspheres,
+//! CBspheres_refract and the microfacet Al/Ag spheres 1.44× each, the
+//! copper bunny 1.23–1.27×, CBgems' three glass gems 1.04–1.05×; q =
+//! 0.15–0.25 alike, 0.35 less. It does not remove the rest: within a cone
+//! only a few per cent of the directions lead on to the light, a mesh's
+//! bounding cone also holds directions that pass beside it, and the
+//! ceiling lit by the glass sphere's bright spot on the floor is found by
+//! the floor's rays, where the sphere fills a wide cone.
 //!
 //! CS184, Mitsuba's `path` and Cycles' path tracer sample a diffuse bounce
 //! by its cosine alone. This is not path guiding in general (no learned
 //! distribution): it only knows where the non-diffuse objects are.
-//! Scenes with more than `MAX_TARGETS` such spheres get no guide (the pdf
-//! sums over them at every diffuse vertex).
+//! Scenes with more than `MAX_TARGETS` targets get no guide (the pdf sums
+//! over them at every diffuse vertex), with a note.
 
 use super::sphere_cone::SphereCone;
 use crate::scene::{material, Scene, Shape};
@@ -39,7 +51,28 @@ pub const MAX_TARGETS: usize = 16;
 /// targets (`--specular-guide`).
 pub const DEFAULT_FRACTION: f32 = 0.2;
 
-/// One specular or glossy sphere.
+/// Objects reflecting or transmitting less than this (their brightest
+/// channel, at normal incidence) are not aimed at: their caustics are dim,
+/// and the rays aimed at them are taken from the cosine lobe, whose other
+/// directions then weigh 1/(1 − q) more. Measured (8 seeds × 64 spp,
+/// 256×192, relMSE × time against q = 0): CBcoil's mirror coil of
+/// reflectance 0.3 lost (0.82×), the copper bunny (F0 up to 0.95) gained
+/// 1.27×, CBgems' glass gems 1.04×.
+pub const MIN_ALBEDO: f32 = 0.5;
+
+/// The brightest channel of what a material reflects or transmits
+/// non-diffusely (at normal incidence); 0 for diffuse and emitters.
+fn specular_albedo(b: &material::Bsdf) -> f32 {
+    match *b {
+        material::Bsdf::Diffuse { .. } | material::Bsdf::Emission { .. } => 0.0,
+        material::Bsdf::Mirror { reflectance } => reflectance.max_element(),
+        material::Bsdf::Glass { reflectance, transmittance, .. } => reflectance.max(transmittance).max_element(),
+        material::Bsdf::Refraction { transmittance, .. } => transmittance.max_element(),
+        material::Bsdf::Microfacet { eta, k, .. } => crate::bsdf::fresnel::conductor(1.0, eta, k).max_element(),
+    }
+}
+
+/// The bounding sphere of one specular or glossy object.
 #[derive(Clone, Copy, Debug)]
 struct Target {
     center: Vec3,
@@ -54,9 +87,9 @@ pub struct SpecularGuide {
 }
 
 impl SpecularGuide {
-    /// The guide for `scene`'s non-diffuse, non-emissive spheres, or `None`
-    /// when there are none, more than `MAX_TARGETS` (then with a note to
-    /// print), or `fraction` is not in (0, 1) (0 turns guiding off).
+    /// The guide for `scene`'s bright non-diffuse, non-emissive objects, or
+    /// `None` when there are none, more than `MAX_TARGETS` (then with a
+    /// note to print), or `fraction` is not in (0, 1) (0 turns guiding off).
     pub fn of_scene(scene: &Scene, fraction: f32) -> (Option<SpecularGuide>, Option<String>) {
         if !(fraction > 0.0 && fraction < 1.0) {
             return (None, None);
@@ -64,22 +97,27 @@ impl SpecularGuide {
         let mut targets = Vec::new();
         for (g, shape) in scene.shapes.iter().enumerate() {
             let m = scene.material_of(g as u32);
-            if m.emission != Vec3::ZERO || matches!(m.bsdf, material::Bsdf::Diffuse { .. } | material::Bsdf::Emission { .. }) {
+            if m.emission != Vec3::ZERO || specular_albedo(&m.bsdf) < MIN_ALBEDO {
                 continue;
             }
-            // Spheres only: a sphere's cone is exactly its silhouette, so
-            // every guided ray hits it. A mesh's bounding-sphere cone sends
-            // rays past it: measured (256×192, 128 spp, q = 0.15–0.25,
-            // relMSE × time against q = 0) CBgems' three glass gems 0.88–0.94×,
-            // CBcoil's mirror coil 0.82–0.88×, the copper bunny 1.10–1.12×.
-            let Shape::Sphere { center, radius } = shape else { continue };
-            if *radius > 0.0 && radius.is_finite() {
-                targets.push(Target { center: *center, radius: *radius });
+            let t = match shape {
+                Shape::Sphere { center, radius } => Target { center: *center, radius: *radius },
+                Shape::Mesh(mesh) => {
+                    let Some(first) = mesh.positions.first() else { continue };
+                    let (lo, hi) = mesh.positions.iter().fold((*first, *first), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+                    let center = 0.5 * (lo + hi);
+                    // Rounded up so that every vertex is inside.
+                    let r = mesh.positions.iter().map(|p| (*p - center).length()).fold(0.0f32, f32::max);
+                    Target { center, radius: r * (1.0 + 1e-5) + f32::EPSILON * center.abs().max_element() }
+                }
+            };
+            if t.radius > 0.0 && t.radius.is_finite() {
+                targets.push(t);
             }
         }
         match targets.len() {
             0 => (None, None),
-            n if n > MAX_TARGETS => (None, Some(format!("{n} mirror, glass or metal spheres: more than {MAX_TARGETS}, so diffuse bounces are not aimed at them (--specular-guide)"))),
+            n if n > MAX_TARGETS => (None, Some(format!("{n} mirror, glass or metal objects: more than {MAX_TARGETS}, so diffuse bounces are not aimed at them (--specular-guide)"))),
             _ => (Some(SpecularGuide { targets, fraction }), None),
         }
     }

@@ -328,7 +328,7 @@ impl PathTracer<'_> {
     }
 
     /// A diffuse vertex's continuation from the mixture of its cosine lobe
-    /// and cones towards the scene's specular and glossy spheres
+    /// and cones towards the scene's specular and glossy objects
     /// (`light::specular_guide`): `None` where the guide does not apply
     /// (not diffuse, `-H`, the path's last vertex, no guide or no target in
     /// view), else the sample (`Some(None)`: the direction is below the
