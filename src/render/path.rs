@@ -148,9 +148,9 @@ impl PathTracer<'_> {
     /// wavefront's terms (`direct_terms`), their rays traced one by one.
     /// Also whether the vertex's BSDF sample can still find light (see
     /// `direct_terms`).
-    fn direct(&self, v: &Vertex, sampler: &mut Sampler, rays: &mut u64) -> (Vec3, bool) {
+    fn direct(&self, v: &Vertex, bounce: u32, sampler: &mut Sampler, rays: &mut u64) -> (Vec3, bool) {
         let (mut terms, mut shadow, mut closest) = (Vec::new(), Vec::new(), Vec::new());
-        let bsdf_finds_light = self.direct_terms(v, sampler, &mut terms, &mut shadow, &mut closest);
+        let bsdf_finds_light = self.direct_terms(v, bounce, sampler, &mut terms, &mut shadow, &mut closest);
         *rays += (shadow.len() + closest.len()) as u64;
         let occluded: Vec<bool> = shadow.iter().map(|r| self.accel.occluded(r)).collect();
         let found: Vec<Option<Hit>> = closest.iter().map(|r| self.accel.intersect(r)).collect();
@@ -187,7 +187,7 @@ impl Integrator for PathTracer<'_> {
             sampler.set_bounce(bounce);
             let mut seeks_light = false;
             if count {
-                let (d, finds) = self.direct(&v, sampler, rays);
+                let (d, finds) = self.direct(&v, bounce, sampler, rays);
                 l += beta * d;
                 seeks_light = finds;
             }

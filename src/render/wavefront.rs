@@ -13,6 +13,7 @@
 
 use super::path::{Continuation, PathTracer, Vertex};
 use crate::accel::Hit;
+use crate::light::specular_guide::GuideAt;
 use crate::light::{emitted, lune, Light, LightSample, Target};
 use crate::ray::Ray;
 use crate::bsdf::{Bsdf, BsdfSample};
@@ -117,7 +118,7 @@ impl PathTracer<'_> {
                 sampler.set_bounce(p.bounce);
                 let first = terms.len();
                 p.counted = counts(p.bounce);
-                let seeks_light = p.counted && self.direct_terms(v, sampler, &mut terms, &mut shadow, &mut closest);
+                let seeks_light = p.counted && self.direct_terms(v, p.bounce, sampler, &mut terms, &mut shadow, &mut closest);
                 p.terms = first..terms.len();
                 p.next = self.continuation(v, p.bounce, seeks_light, p.beta, p.radiance_scale, sampler).map(|c| {
                     closest.push(v.it.spawn_ray(c.wi));
@@ -185,12 +186,15 @@ impl PathTracer<'_> {
     /// hemisphere samples for the lights a ray can hit. Returns whether the
     /// vertex's BSDF sample can still add light (some light a ray can hit is
     /// not sampled alone here, or the BSDF is a delta).
-    pub(super) fn direct_terms(&self, v: &Vertex, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) -> bool {
+    pub(super) fn direct_terms(&self, v: &Vertex, bounce: u32, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) -> bool {
         // Delta BSDFs see lights only through their sampled ray.
         let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return true };
         let explicit = self.lights.lights.iter().enumerate().filter(|(_, l)| !self.hemisphere || !l.is_visible());
         let alone = self.alone(&bsdf);
         let env_normal = self.env_normal(&bsdf, v);
+        // The light samples' MIS weights need the pdf of the continuation
+        // this vertex will draw: the guided mixture where it applies.
+        let guide = self.guide_at(v, &bsdf, bounce == self.max_depth);
         let mut bsdf_finds_light = self.hemisphere;
         for (li, light) in explicit {
             let n = if light.is_delta() { 1 } else { self.light_samples };
@@ -226,7 +230,15 @@ impl PathTracer<'_> {
                     Target::Point(q) => v.it.spawn_ray_to(q),
                     Target::Infinite => v.it.spawn_ray(s.wi),
                 });
-                let w = if mis && !by_itself { super::path::power_heuristic(n as f32 * s.pdf, bsdf.pdf(v.wo, wi)) } else { 1.0 };
+                let w = if mis && !by_itself {
+                    let p_bsdf = match &guide {
+                        Some(g) => guided_pdf(g, wi, s.wi, None),
+                        None => bsdf.pdf(v.wo, wi),
+                    };
+                    super::path::power_heuristic(n as f32 * s.pdf, p_bsdf)
+                } else {
+                    1.0
+                };
                 terms.push(Term::Shadow { ray: shadow.len() - 1, value: f * s.value * cos / s.pdf * w });
             }
             terms.push(Term::Group { n });
@@ -327,22 +339,28 @@ impl PathTracer<'_> {
         Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale, alone: self.alone(&bsdf), env_normal: self.env_normal(&bsdf, v) })
     }
 
-    /// A diffuse vertex's continuation from the mixture of its cosine lobe
-    /// and cones towards the scene's specular and glossy objects
-    /// (`light::specular_guide`): `None` where the guide does not apply
-    /// (not diffuse, `-H`, the path's last vertex, no guide or no target in
-    /// view), else the sample (`Some(None)`: the direction is below the
-    /// surface). The lobe's slot picks the strategy and the target (diffuse
-    /// sampling does not use it), the direction's slot draws the direction
-    /// either way.
-    fn guided(&self, v: &Vertex, bsdf: &Bsdf, last: bool, sampler: &mut Sampler, u: (f32, f32)) -> Option<Option<(BsdfSample, Vec3)>> {
-        let Bsdf::Diffuse(d) = bsdf else { return None };
-        let guide = self.lights.guide.as_ref().filter(|_| !self.hemisphere && !last)?;
-        let at = guide.at(v.it.p, v.ns);
-        let q = at.fraction();
-        if q == 0.0 {
+    /// The guide's cones from diffuse vertex `v` (`light::specular_guide`),
+    /// where its continuation is drawn from the guided mixture: not at the
+    /// path's last vertex (`last`), not with `-H`, and only with a target
+    /// in view.
+    fn guide_at(&self, v: &Vertex, bsdf: &Bsdf, last: bool) -> Option<GuideAt> {
+        if !matches!(bsdf, Bsdf::Diffuse(_)) || self.hemisphere || last {
             return None;
         }
+        let at = self.lights.guide.as_ref()?.at(v.it.p, v.ns);
+        (at.fraction() > 0.0).then_some(at)
+    }
+
+    /// A diffuse vertex's continuation from the mixture of its cosine lobe
+    /// and cones towards the scene's specular and glossy objects: `None`
+    /// where the guide does not apply (`guide_at`), else the sample
+    /// (`Some(None)`: the direction is below the surface). The lobe's slot
+    /// picks the strategy and the target (diffuse sampling does not use
+    /// it), the direction's slot draws the direction either way.
+    fn guided(&self, v: &Vertex, bsdf: &Bsdf, last: bool, sampler: &mut Sampler, u: (f32, f32)) -> Option<Option<(BsdfSample, Vec3)>> {
+        let Bsdf::Diffuse(d) = bsdf else { return None };
+        let at = self.guide_at(v, bsdf, last)?;
+        let q = at.fraction();
         let pick = sampler.slot_1d(dim::BSDF_LOBE, 0);
         let (wi, from) = if pick < q {
             let Some((wi, k)) = at.sample(pick / q, u) else { return Some(None) };
@@ -354,11 +372,18 @@ impl PathTracer<'_> {
         if !(local.z > 0.0) {
             return Some(None);
         }
-        let pdf = (1.0 - q) * cosine_hemisphere_pdf(local.z) + q * at.pdf(wi, from);
+        let pdf = guided_pdf(&at, local, wi, from);
         if !(pdf > 0.0) || !pdf.is_finite() {
             return Some(None);
         }
         let weight = d.albedo * (local.z / PI / pdf);
         Some(Some((BsdfSample { wi: local, weight, pdf, delta: false, radiance_scale: 1.0 }, wi)))
     }
+}
+
+/// The guided mixture's pdf of a direction, `local` in the shading frame
+/// and `world` (see `GuideAt::pdf` for `from`).
+fn guided_pdf(at: &GuideAt, local: Vec3, world: Vec3, from: Option<usize>) -> f32 {
+    let q = at.fraction();
+    (1.0 - q) * cosine_hemisphere_pdf(local.z) + q * at.pdf(world, from)
 }
