@@ -193,8 +193,9 @@ impl PathTracer<'_> {
         let alone = self.alone(&bsdf);
         let env_normal = self.env_normal(&bsdf, v);
         // The light samples' MIS weights need the pdf of the continuation
-        // this vertex will draw: the guided mixture where it applies.
-        let guide = self.guide_at(v, &bsdf, bounce == self.max_depth);
+        // this vertex will draw: the guided mixture where it applies (its
+        // cones found on the first MIS weight; lights sampled alone need none).
+        let mut guide: Option<Option<GuideAt>> = None;
         let mut bsdf_finds_light = self.hemisphere;
         for (li, light) in explicit {
             let n = if light.is_delta() { 1 } else { self.light_samples };
@@ -231,7 +232,7 @@ impl PathTracer<'_> {
                     Target::Infinite => v.it.spawn_ray(s.wi),
                 });
                 let w = if mis && !by_itself {
-                    let p_bsdf = match &guide {
+                    let p_bsdf = match guide.get_or_insert_with(|| self.guide_at(v, &bsdf, bounce == self.max_depth)) {
                         Some(g) => guided_pdf(g, wi, s.wi, None),
                         None => bsdf.pdf(v.wo, wi),
                     };
