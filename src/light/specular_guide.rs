@@ -122,11 +122,6 @@ impl SpecularGuide {
         }
     }
 
-    /// How many objects the guide aims at.
-    pub fn targets(&self) -> usize {
-        self.targets.len()
-    }
-
     /// The targets as seen from `p` on a surface with normal `n`: those
     /// `p` is outside of and whose cone reaches above the tangent plane.
     pub fn at(&self, p: Vec3, n: Vec3) -> GuideAt {
@@ -195,7 +190,12 @@ impl GuideAt {
     pub fn pdf(&self, w: Vec3, from: Option<usize>) -> f32 {
         let mut sum = 0.0;
         for (k, c) in self.cones[..self.len].iter().enumerate() {
-            if from == Some(k) || 1.0 - w.dot(c.axis) <= c.one_minus_cos {
+            // 1 − cos of the angle to the axis as |w − axis|²/2: exact to a
+            // few ulps of itself, where 1 − w·axis keeps only an absolute
+            // 6e-8, as large as a far sphere's whole cone. A sample the
+            // cosine drew inside a cone but judged outside would count
+            // that part of the cone twice (once per strategy).
+            if from == Some(k) || 0.5 * (w - c.axis).length_squared() <= c.one_minus_cos {
                 sum += 1.0 / (2.0 * PI * c.one_minus_cos);
             }
         }
@@ -298,6 +298,22 @@ mod tests {
                 let se = if k == 3 { (se * se + c1_se * c1_se).sqrt() } else { se };
                 assert!((m - x).abs() < 5.0 * se + 1e-9 * x, "q {q}, integral {k}: {m} ± {se} against {x}");
             }
+        }
+    }
+
+    #[test]
+    fn directions_just_inside_a_far_cone_are_in_it() {
+        // A sphere seen under 1e-3 rad: directions at 0.999 and 1.001 of
+        // its angular radius, all around the axis.
+        let (dist, r) = (40.0f32, 0.04f32);
+        let g = SpecularGuide { targets: vec![Target { center: Vec3::new(0.0, 0.0, dist), radius: r }], fraction: 0.5 };
+        let at = g.at(Vec3::ZERO, Vec3::Z);
+        let theta = (r / dist).asin();
+        for i in 0..64 {
+            let phi = i as f32 * 0.1;
+            let dir = |t: f32| Vec3::new(t.sin() * phi.cos(), t.sin() * phi.sin(), t.cos());
+            assert!(at.pdf(dir(0.999 * theta), None) > 0.0, "inside at φ {phi}");
+            assert_eq!(at.pdf(dir(1.001 * theta), None), 0.0, "outside at φ {phi}");
         }
     }
 
