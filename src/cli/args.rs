@@ -165,6 +165,13 @@ pub struct RenderArgs {
     /// (`light::specular_guide`)
     #[arg(long, value_name = "FRACTION", default_value_t = crate::light::specular_guide::DEFAULT_FRACTION)]
     pub specular_guide: f32,
+    /// With several lights: each light sample picks one, in proportion to
+    /// an estimate of what each sends to the vertex (`light::pick`), or
+    /// every light is sampled at every vertex. Scenes with an environment
+    /// map, the hemisphere light, a non-rectangular emissive mesh or more
+    /// than 8 lights always sample every light
+    #[arg(long, value_enum, default_value_t = LightPickArg::One)]
+    pub light_pick: LightPickArg,
     /// Also write the linear radiance as OpenEXR
     #[arg(long, value_name = "FILE")]
     pub exr: Option<PathBuf>,
@@ -217,6 +224,14 @@ pub enum EnvSamplingArg {
     Product,
     /// The map's luminance alone
     Map,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LightPickArg {
+    /// Each light sample picks one light by its estimated share here
+    One,
+    /// Every light is sampled at every vertex (CS184's way; for A/B comparisons)
+    All,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

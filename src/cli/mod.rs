@@ -3,7 +3,7 @@
 
 mod args;
 
-pub use args::{Cli, Command, EnvSamplingArg, IntegratorKind, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg};
+pub use args::{Cli, Command, EnvSamplingArg, IntegratorKind, LightPickArg, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg};
 
 use crate::accel;
 use crate::camera::{Camera, DEFAULT_HEIGHT, DEFAULT_WIDTH};
@@ -192,7 +192,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let lights = match a.integrator {
         IntegratorKind::Path => {
             check_materials(&scene)?;
-            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_product(a.env_sampling == EnvSamplingArg::Product).with_specular_guide(&scene, a.specular_guide);
+            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_product(a.env_sampling == EnvSamplingArg::Product).with_specular_guide(&scene, a.specular_guide).with_light_pick(&scene, a.light_pick == LightPickArg::One);
             if l.lights.is_empty() {
                 // One line: the notes (a zero-radiance light dropped) go into it.
                 let why = if l.notes.is_empty() { String::new() } else { format!(" ({})", l.notes.join("; ")) };
@@ -416,6 +416,7 @@ fn partial_settings(
         kv("sky_sampling", a.sky_sampling.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("env_sampling", a.env_sampling.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("specular_guide", a.specular_guide.to_string()),
+        kv("light_pick", a.light_pick.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("adaptive", adaptive),
         kv("integrator", a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()),
         kv("max_depth", a.max_depth.unwrap_or(1).to_string()),

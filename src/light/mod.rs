@@ -26,6 +26,7 @@
 pub mod env_product;
 pub mod environment;
 pub mod lune;
+pub mod pick;
 pub mod sphere_cone;
 pub mod spherical_rect;
 pub mod specular_guide;
@@ -337,6 +338,9 @@ pub struct Lights {
     /// Continuation rays of diffuse vertices partly aimed at the scene's
     /// specular and glossy objects (`specular_guide`); `None`: cosine only.
     pub guide: Option<specular_guide::SpecularGuide>,
+    /// Each light sample picks one of the lights (`pick`: several lights,
+    /// all with an estimate); `None`: every light is sampled.
+    pub pick: Option<pick::Picker>,
 }
 
 impl Lights {
@@ -430,7 +434,7 @@ impl Lights {
                 out.lights.push(Light::Environment(e));
             }
         }
-        Ok(out.with_specular_guide(scene, specular_guide::DEFAULT_FRACTION))
+        Ok(out.with_specular_guide(scene, specular_guide::DEFAULT_FRACTION).with_light_pick(scene, true))
     }
 
     /// The CS184 sampling of every light instead of ours, for A/B
@@ -454,6 +458,13 @@ impl Lights {
     /// `product` = the map × cosine bound (`env_product`), else the map alone.
     pub fn with_env_product(mut self, product: bool) -> Lights {
         self.env_product = product;
+        self
+    }
+
+    /// Pick one light per light sample (`pick`) where the scene allows it
+    /// (`--light-pick one`), or sample every light (`all`).
+    pub fn with_light_pick(mut self, scene: &Scene, one: bool) -> Lights {
+        self.pick = if one { pick::Picker::new(scene, &self.lights) } else { None };
         self
     }
 

@@ -94,7 +94,11 @@ impl PathTracer<'_> {
                 if c.alone && light.covers(v.it.p) {
                     return 0.0; // estimated by its light samples alone
                 }
-                let pl = light.pdf_hit(self.scene, v.it.p, hit.p, hit.ng, hit.prim_id);
+                let mut pl = light.pdf_hit(self.scene, v.it.p, hit.p, hit.ng, hit.prim_id);
+                if let Some(picker) = self.lights.pick.as_ref().filter(|_| !self.hemisphere) {
+                    // Light samples pick this light with this probability here.
+                    pl *= picker.probabilities(&self.lights.lights, v.it.p, v.ns)[k];
+                }
                 power_heuristic(c.pdf, self.light_samples as f32 * pl)
             }
             None => 1.0,

@@ -14,7 +14,7 @@
 use super::path::{Continuation, PathTracer, Vertex};
 use crate::accel::Hit;
 use crate::light::specular_guide::GuideAt;
-use crate::light::{emitted, lune, Light, LightSample, Target};
+use crate::light::{emitted, lune, pick, Light, LightSample, Target};
 use crate::ray::Ray;
 use crate::bsdf::{Bsdf, BsdfSample};
 use crate::sampler::{dim, Sampler};
@@ -47,6 +47,18 @@ pub(super) enum Term {
     Hemisphere { ray: usize, f: Vec3, wi: Vec3, cos: f32 },
     /// End of one light's (or the hemisphere's) samples: `total += sum / n`.
     Group { n: u32 },
+}
+
+/// What every light sample at one vertex shares.
+struct LightsAt<'v> {
+    v: &'v Vertex,
+    bsdf: Bsdf,
+    alone: bool,
+    env_normal: Option<Vec3>,
+    /// The path's last vertex (no guided continuation follows).
+    last: bool,
+    /// The guide's cones here, found by the first MIS weight that needs them.
+    guide: Option<Option<GuideAt>>,
 }
 
 /// One path between bounces.
@@ -189,58 +201,42 @@ impl PathTracer<'_> {
     pub(super) fn direct_terms(&self, v: &Vertex, bounce: u32, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) -> bool {
         // Delta BSDFs see lights only through their sampled ray.
         let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return true };
+        let mut at = LightsAt {
+            v,
+            bsdf,
+            alone: self.alone(&bsdf),
+            env_normal: self.env_normal(&bsdf, v),
+            last: bounce == self.max_depth,
+            guide: None,
+        };
+        if let Some(picker) = self.lights.pick.as_ref().filter(|_| !self.hemisphere) {
+            // One light per sample, picked by its estimate here (`light::pick`).
+            let prob = picker.probabilities(&self.lights.lights, v.it.p, v.ns);
+            let count = self.lights.lights.len();
+            let n = self.light_samples;
+            for j in 0..n {
+                // The picked light draws from slots shared by all lights:
+                // its own would see only the samples that pick it, a random
+                // subset of their stratified sequence (measured on CBcoil:
+                // 13 % more variance than sampling every light).
+                let li = pick::pick(&prob, count, sampler.slot_1d(dim::LIGHT_PICK, j as u64));
+                self.light_term(&mut at, li, j as u64, n, prob[li], sampler, terms, shadow);
+            }
+            terms.push(Term::Group { n });
+            // Only the last vertex asks whether its BSDF sample can still
+            // find light (`continuation`); there, every light it can hit is
+            // weighed as in `bsdf_weight_hit`.
+            return !at.last || self.lights.lights.iter().any(|l| l.is_visible() && !(at.alone && l.covers(v.it.p)));
+        }
         let explicit = self.lights.lights.iter().enumerate().filter(|(_, l)| !self.hemisphere || !l.is_visible());
-        let alone = self.alone(&bsdf);
-        let env_normal = self.env_normal(&bsdf, v);
-        // The light samples' MIS weights need the pdf of the continuation
-        // this vertex will draw: the guided mixture where it applies (its
-        // cones found on the first MIS weight; lights sampled alone need none).
-        let mut guide: Option<Option<GuideAt>> = None;
         let mut bsdf_finds_light = self.hemisphere;
         for (li, light) in explicit {
             let n = if light.is_delta() { 1 } else { self.light_samples };
-            let mis = !self.hemisphere && light.is_visible();
             for j in 0..n {
                 // Light li's sample j: its own slots, whatever other lights drew.
-                let k = li as u64 * self.light_samples as u64 + j as u64;
-                let u = sampler.slot_2d(dim::LIGHT, k);
-                let u_sel = if light.uses_selection() { sampler.slot_1d(dim::LIGHT_CHOICE, k) } else { 0.0 };
-                // The sky at a diffuse vertex: the lune sampler alone (its
-                // weight is constant; BSDF rays escaping there add nothing).
-                let lune = alone && matches!(light, Light::Hemisphere { lune: true, .. });
-                let s = match light {
-                    Light::Hemisphere { radiance, .. } if lune => {
-                        lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true, prim: 0 })
-                    }
-                    _ => light.sample(self.scene, v.it.p, u, u_sel, env_normal),
-                };
-                // Sampled alone: the BSDF sample need not look for it.
-                let by_itself = alone && s.is_some_and(|s| s.covers);
+                let slot = li as u64 * self.light_samples as u64 + j as u64;
+                let by_itself = self.light_term(&mut at, li, slot, n, 1.0, sampler, terms, shadow);
                 bsdf_finds_light |= light.is_visible() && !by_itself;
-                let Some(s) = s else { continue };
-                let cos = s.wi.dot(v.ns);
-                if cos <= 0.0 || s.wi.dot(v.ng) <= 0.0 || s.pdf <= 0.0 {
-                    continue;
-                }
-                let wi = v.frame.to_local(s.wi);
-                let f = bsdf.eval(v.wo, wi);
-                if f == Vec3::ZERO {
-                    continue;
-                }
-                shadow.push(match s.target {
-                    Target::Point(q) => v.it.spawn_ray_to(q),
-                    Target::Infinite => v.it.spawn_ray(s.wi),
-                });
-                let w = if mis && !by_itself {
-                    let p_bsdf = match guide.get_or_insert_with(|| self.guide_at(v, &bsdf, bounce == self.max_depth)) {
-                        Some(g) => guided_pdf(g, wi, s.wi, None),
-                        None => bsdf.pdf(v.wo, wi),
-                    };
-                    super::path::power_heuristic(n as f32 * s.pdf, p_bsdf)
-                } else {
-                    1.0
-                };
-                terms.push(Term::Shadow { ray: shadow.len() - 1, value: f * s.value * cos / s.pdf * w });
             }
             terms.push(Term::Group { n });
         }
@@ -261,6 +257,60 @@ impl PathTracer<'_> {
         }
         terms.push(Term::Group { n });
         bsdf_finds_light
+    }
+
+    /// A sample of light `li` (one of `n`, each taken with probability
+    /// `p_pick`) at the vertex, drawn from the light slots numbered `k`:
+    /// its term and shadow ray, when it carries light. Returns whether the
+    /// light was sampled alone (`PathTracer::alone`): then the BSDF sample
+    /// need not look for it.
+    #[allow(clippy::too_many_arguments)]
+    fn light_term(&self, at: &mut LightsAt, li: usize, k: u64, n: u32, p_pick: f32, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>) -> bool {
+        let (v, bsdf) = (at.v, at.bsdf);
+        let light = &self.lights.lights[li];
+        let mis = !self.hemisphere && light.is_visible();
+        let u = sampler.slot_2d(dim::LIGHT, k);
+        let u_sel = if light.uses_selection() { sampler.slot_1d(dim::LIGHT_CHOICE, k) } else { 0.0 };
+        // The sky at a diffuse vertex: the lune sampler alone (its
+        // weight is constant; BSDF rays escaping there add nothing).
+        let lune = at.alone && matches!(light, Light::Hemisphere { lune: true, .. });
+        let s = match light {
+            Light::Hemisphere { radiance, .. } if lune => {
+                lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true, prim: 0 })
+            }
+            _ => light.sample(self.scene, v.it.p, u, u_sel, at.env_normal),
+        };
+        let by_itself = at.alone && s.is_some_and(|s| s.covers);
+        let Some(s) = s else { return by_itself };
+        let cos = s.wi.dot(v.ns);
+        if cos <= 0.0 || s.wi.dot(v.ng) <= 0.0 || s.pdf <= 0.0 {
+            return by_itself;
+        }
+        let wi = v.frame.to_local(s.wi);
+        let f = bsdf.eval(v.wo, wi);
+        if f == Vec3::ZERO {
+            return by_itself;
+        }
+        shadow.push(match s.target {
+            Target::Point(q) => v.it.spawn_ray_to(q),
+            Target::Infinite => v.it.spawn_ray(s.wi),
+        });
+        let pdf = p_pick * s.pdf;
+        let w = if mis && !by_itself {
+            // Against the pdf of the continuation this vertex will draw:
+            // the guided mixture where it applies (its cones found on the
+            // first MIS weight; lights sampled alone need none).
+            let (last, guide) = (at.last, &mut at.guide);
+            let p_bsdf = match guide.get_or_insert_with(|| self.guide_at(v, &bsdf, last)) {
+                Some(g) => guided_pdf(g, wi, s.wi, None),
+                None => bsdf.pdf(v.wo, wi),
+            };
+            super::path::power_heuristic(n as f32 * pdf, p_bsdf)
+        } else {
+            1.0
+        };
+        terms.push(Term::Shadow { ray: shadow.len() - 1, value: f * s.value * cos / pdf * w });
+        by_itself
     }
 
     /// The direct light of recorded `terms`, summed as `PathTracer::direct` sums.

@@ -37,6 +37,8 @@ pub mod dim {
     pub const RUSSIAN_ROULETTE: u32 = 4;
     /// `-H` hemisphere directions.
     pub const HEMISPHERE: u32 = 5;
+    /// Which light a light sample picks (`light::pick`), per `-l` sample.
+    pub const LIGHT_PICK: u32 = 6;
 
     /// The id of `slot` at path vertex `bounce` (1 = the camera ray's hit),
     /// for the `k`-th of several draws of that slot (light `i`'s sample `j`
