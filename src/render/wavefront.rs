@@ -217,8 +217,7 @@ impl PathTracer<'_> {
             for j in 0..n {
                 // The picked light draws from slots shared by all lights:
                 // its own would see only the samples that pick it, a random
-                // subset of their stratified sequence (measured on CBcoil:
-                // 13 % more variance than sampling every light).
+                // subset of their stratified sequence.
                 let li = pick::pick(&prob, count, sampler.slot_1d(dim::LIGHT_PICK, j as u64));
                 self.light_term(&mut at, li, j as u64, n, prob[li], sampler, terms, shadow);
             }
