@@ -84,7 +84,8 @@ pub struct RenderArgs {
     /// Camera rays per pixel (the maximum with -a) [default: 1]
     #[arg(short = 's', value_name = "N")]
     pub spp: Option<u32>,
-    /// Samples per area light [default: 1]
+    /// Samples per area light; with several lights and --light-pick one,
+    /// light samples per vertex, each picking one light [default: 1]
     #[arg(short = 'l', value_name = "N")]
     pub light_samples: Option<u32>,
     /// Maximum ray depth [default: 1]
