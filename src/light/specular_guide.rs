@@ -42,7 +42,6 @@
 use super::sphere_cone::SphereCone;
 use crate::scene::{material, Scene, Shape};
 use glam::Vec3;
-use std::f32::consts::PI;
 
 /// More targets than this and the per-vertex sum costs more than it saves.
 pub const MAX_TARGETS: usize = 16;
@@ -103,9 +102,10 @@ impl SpecularGuide {
             let t = match shape {
                 Shape::Sphere { center, radius } => Target { center: *center, radius: *radius },
                 Shape::Mesh(mesh) => {
-                    let Some(first) = mesh.positions.first() else { continue };
-                    let (lo, hi) = mesh.positions.iter().fold((*first, *first), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-                    let center = 0.5 * (lo + hi);
+                    if mesh.positions.is_empty() {
+                        continue;
+                    }
+                    let center = shape.bounds().center();
                     // Rounded up so that every vertex is inside.
                     let r = mesh.positions.iter().map(|p| (*p - center).length()).fold(0.0f32, f32::max);
                     Target { center, radius: r * (1.0 + 1e-5) + f32::EPSILON * center.abs().max_element() }
@@ -123,44 +123,36 @@ impl SpecularGuide {
     }
 
     /// The targets as seen from `p` on a surface with normal `n`: those
-    /// `p` is outside of and whose cone reaches above the tangent plane.
+    /// `p` is clearly outside of (`SphereCone::new`) and whose cone reaches
+    /// above the tangent plane.
     pub fn at(&self, p: Vec3, n: Vec3) -> GuideAt {
-        let mut at = GuideAt { p, cones: [Cone::default(); MAX_TARGETS], len: 0, fraction: self.fraction };
+        let mut at = GuideAt { cones: [None; MAX_TARGETS], len: 0, fraction: self.fraction };
         for t in &self.targets {
-            let d = t.center - p;
-            let dist2 = d.length_squared();
-            // Same "clearly outside" rule as `SphereCone::new`.
-            if !(dist2 > t.radius * t.radius * 1.0001) || !dist2.is_finite() || d.dot(n) <= -t.radius {
+            if (t.center - p).dot(n) <= -t.radius {
                 continue;
             }
-            let dist = dist2.sqrt();
-            let sin2 = t.radius * t.radius / dist2;
-            // 1 − cos θmax as `SphereCone` computes it (series when tiny).
-            let omc = if sin2 < 1e-3 { sin2 * (0.5 + sin2 / 8.0) } else { 1.0 - (1.0 - sin2).sqrt() };
-            at.cones[at.len] = Cone { axis: d / dist, one_minus_cos: omc, center: t.center, radius: t.radius };
-            at.len += 1;
+            if let Some(cone) = SphereCone::new(p, t.center, t.radius) {
+                at.cones[at.len] = Some(cone);
+                at.len += 1;
+            }
         }
         at
     }
 }
 
-#[derive(Clone, Copy, Debug, Default)]
-struct Cone {
-    axis: Vec3,
-    one_minus_cos: f32,
-    center: Vec3,
-    radius: f32,
-}
-
-/// The guide's cones from one vertex.
+/// The guide's cones from one vertex (the first `len` are `Some`).
 pub struct GuideAt {
-    p: Vec3,
-    cones: [Cone; MAX_TARGETS],
+    cones: [Option<SphereCone>; MAX_TARGETS],
     len: usize,
     fraction: f32,
 }
 
 impl GuideAt {
+    /// The cones in view.
+    fn cones(&self) -> impl Iterator<Item = &SphereCone> {
+        self.cones[..self.len].iter().flatten()
+    }
+
     /// The mixture's guided share here: 0 when no target is in view.
     pub fn fraction(&self) -> f32 {
         if self.len == 0 {
@@ -178,8 +170,7 @@ impl GuideAt {
             return None;
         }
         let k = ((u_pick * self.len as f32) as usize).min(self.len - 1);
-        let c = &self.cones[k];
-        SphereCone::new(self.p, c.center, c.radius).map(|cone| (cone.sample(u).0, k))
+        self.cones[k].map(|cone| (cone.sample(u).0, k))
     }
 
     /// The guided part's pdf of direction `w` (unit): (1/n) Σ over the
@@ -188,17 +179,10 @@ impl GuideAt {
     /// its rim (those rim samples would otherwise be weighted as if only
     /// the cosine could have drawn them).
     pub fn pdf(&self, w: Vec3, from: Option<usize>) -> f32 {
-        let mut sum = 0.0;
-        for (k, c) in self.cones[..self.len].iter().enumerate() {
-            // 1 − cos of the angle to the axis as |w − axis|²/2: exact to a
-            // few ulps of itself, where 1 − w·axis keeps only an absolute
-            // 6e-8, as large as a far sphere's whole cone. A sample the
-            // cosine drew inside a cone but judged outside would count
-            // that part of the cone twice (once per strategy).
-            if from == Some(k) || 0.5 * (w - c.axis).length_squared() <= c.one_minus_cos {
-                sum += 1.0 / (2.0 * PI * c.one_minus_cos);
-            }
-        }
+        // A sample the cosine drew inside a cone but judged outside would
+        // count that part of the cone twice (once per strategy), hence the
+        // exact test (`SphereCone::contains`).
+        let sum: f32 = self.cones().enumerate().filter(|&(k, c)| from == Some(k) || c.contains(w)).map(|(_, c)| c.pdf()).sum();
         sum / self.len.max(1) as f32
     }
 }
@@ -208,6 +192,7 @@ mod tests {
     use super::*;
     use crate::rng::Rng;
     use crate::sampling::{cosine_hemisphere, uniform_sphere};
+    use std::f32::consts::PI;
 
     /// Up (+z) at the origin: one sphere overhead, one straddling the
     /// horizon, one wholly below it (not a target from here).
@@ -266,8 +251,8 @@ mod tests {
         for q in [0.2f32, 0.6] {
             let g = guide(q);
             let at = g.at(Vec3::ZERO, Vec3::Z);
-            let cones: Vec<(Vec3, f32)> = at.cones[..at.len].iter().map(|c| (c.axis, c.one_minus_cos)).collect();
-            let inside = |w: Vec3, k: usize| 1.0 - w.dot(cones[k].0) <= cones[k].1 && w.z > 0.0;
+            let cones: Vec<SphereCone> = at.cones().copied().collect();
+            let inside = |w: Vec3, k: usize| cones[k].contains(w) && w.z > 0.0;
             let mut rng = Rng::new(17, q.to_bits() as u64);
             let n = 400_000;
             let mut est: [Vec<f64>; 4] = Default::default();
@@ -292,7 +277,7 @@ mod tests {
                 uni.push(if inside(w, 1) { 4.0 * std::f64::consts::PI } else { 0.0 });
             }
             let (c1_exact, c1_se) = mean_se(&uni);
-            let exact = [std::f64::consts::PI, 2.0 * std::f64::consts::PI, 2.0 * std::f64::consts::PI * cones[0].1 as f64, c1_exact];
+            let exact = [std::f64::consts::PI, 2.0 * std::f64::consts::PI, 1.0 / cones[0].pdf() as f64, c1_exact];
             for (k, (e, x)) in est.iter().zip(exact).enumerate() {
                 let (m, se) = mean_se(e);
                 let se = if k == 3 { (se * se + c1_se * c1_se).sqrt() } else { se };
@@ -323,7 +308,7 @@ mod tests {
         // to the direction, its own cone's density is in its pdf.
         let g = SpecularGuide { targets: vec![Target { center: Vec3::new(0.3, -0.2, 40.0), radius: 0.05 }], fraction: 0.5 };
         let at = g.at(Vec3::ZERO, Vec3::Z);
-        let omega = 2.0 * PI * at.cones[0].one_minus_cos;
+        let omega = 1.0 / at.cones().next().unwrap().pdf();
         for i in 0..1000 {
             let (w, k) = at.sample(0.3, (1.0 - i as f32 * 1e-7, i as f32 / 1000.0)).unwrap();
             assert!((at.pdf(w, Some(k)) * omega - 1.0).abs() < 1e-4);

@@ -13,6 +13,7 @@ use glam::Vec3;
 use std::f32::consts::PI;
 
 /// The cone from `p` to the sphere, ready to sample.
+#[derive(Clone, Copy, Debug)]
 pub struct SphereCone {
     p: Vec3,
     /// Unit axis towards the centre, and a frame around it.
@@ -46,6 +47,14 @@ impl SphereCone {
     /// The cone's solid-angle pdf.
     pub fn pdf(&self) -> f32 {
         1.0 / (2.0 * PI * self.one_minus_cos_max)
+    }
+
+    /// Whether unit direction `w` lies in the cone. 1 − cos of its angle to
+    /// the axis is taken as |w − axis|²/2: exact to a few ulps of itself,
+    /// where 1 − w·axis keeps only an absolute 6e-8, as large as a far
+    /// sphere's whole cone.
+    pub fn contains(&self, w: Vec3) -> bool {
+        0.5 * (w - self.w).length_squared() <= self.one_minus_cos_max
     }
 
     /// A direction uniform in the cone, and the point where it meets the
