@@ -21,6 +21,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub mod scenes;
+mod tables;
+
+pub use tables::Sample;
+use tables::{ratio_table, scaling_table};
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
@@ -44,6 +48,11 @@ pub struct BenchArgs {
     /// Leave out the peer libraries built in with `--features peers` (obvhs)
     #[arg(long)]
     pub no_peers: bool,
+    /// Thread counts to time throughput at, e.g. 1,2,4,8,16 [default: 1 and
+    /// every thread of the machine]. With three or more, a thread-scaling
+    /// table follows the throughput table. Builds always use every thread.
+    #[arg(long, value_delimiter = ',', value_name = "N,...")]
+    pub threads: Vec<usize>,
     /// Also write the throughput rows as CSV
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
@@ -64,6 +73,8 @@ pub const RENDER_SCENES: [&str; 4] = ["CBbunny", "CBspheres_lambertian", "CBsphe
 
 /// Brute force is skipped above this many primitives (hours per measurement).
 const BRUTE_LIMIT: usize = 100_000;
+/// The most threads `--threads` takes (rayon pools beyond this are a typo).
+const MAX_THREADS: usize = 1024;
 /// Builds timed per backend and scene; the table shows the fastest.
 const BUILD_REPS: usize = 3;
 
@@ -313,60 +324,6 @@ fn peers() -> Vec<Contender> {
     v
 }
 
-/// One row of the CSV: `scene, rays, threads, backend, mrays_per_s`.
-pub struct Sample {
-    pub scene: String,
-    pub rays: &'static str,
-    pub threads: usize,
-    pub backend: Contender,
-    pub mrays_per_s: f64,
-}
-
-/// native ÷ `other` throughput per scene, ray kind and thread count.
-fn ratio_table(samples: &[Sample], threads: &[usize], other: Contender) -> String {
-    let mut out = String::new();
-    let mut scenes: Vec<&str> = Vec::new();
-    for s in samples {
-        if !scenes.contains(&s.scene.as_str()) {
-            scenes.push(&s.scene);
-        }
-    }
-    let find = |sc: &str, rays: &str, t: usize, b: Contender| {
-        samples.iter().find(|s| s.scene == sc && s.rays == rays && s.threads == t && s.backend == b).map(|s| s.mrays_per_s)
-    };
-    let mut header = String::from("| scene |");
-    let mut rule = String::from("|---|");
-    for rays in ["camera", "shadow", "random"] {
-        for &t in threads {
-            let _ = write!(header, " {rays} {t}T |");
-            rule.push_str("---:|");
-        }
-    }
-    let mut rows = String::new();
-    for sc in scenes {
-        let mut row = format!("| {sc} |");
-        let mut any = false;
-        for rays in ["camera", "shadow", "random"] {
-            for &t in threads {
-                match (find(sc, rays, t, Contender::Backend(BackendKind::Native)), find(sc, rays, t, other)) {
-                    (Some(n), Some(e)) => {
-                        any = true;
-                        let _ = write!(row, " {:.2} |", n / e);
-                    }
-                    _ => row.push_str(" – |"),
-                }
-            }
-        }
-        if any {
-            let _ = writeln!(rows, "{row}");
-        }
-    }
-    if !rows.is_empty() {
-        let _ = writeln!(out, "{header}\n{rule}");
-        out.push_str(&rows);
-    }
-    out
-}
 
 /// Embree's batch calls compared on one thread (which one the backend uses
 /// for coherent and incoherent batches was chosen from these numbers).
@@ -445,6 +402,18 @@ fn seed_timing(scene: &str) -> (&'static str, &'static str) {
     }
 }
 
+/// The thread counts to time, ascending and distinct: those asked for, or 1
+/// and `all` (just 1 on a one-thread machine).
+fn thread_counts(asked: &[usize], all: usize) -> Result<Vec<usize>> {
+    let mut v: Vec<usize> = if asked.is_empty() { vec![1, all] } else { asked.to_vec() };
+    if let Some(bad) = v.iter().find(|&&t| t == 0 || t > MAX_THREADS) {
+        return Err(Error::new(format!("bench: --threads {bad}: a thread count must be 1 to {MAX_THREADS}")));
+    }
+    v.sort_unstable();
+    v.dedup();
+    Ok(v)
+}
+
 pub fn run(args: &BenchArgs) -> Result<()> {
     let all = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let backends: Vec<BackendKind> = if args.backends.is_empty() {
@@ -468,16 +437,19 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     let brute = Contender::Backend(BackendKind::Brute);
     let names: Vec<String> = if args.scenes.is_empty() { DEFAULT_SCENES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
-    let mut thread_counts = vec![1];
-    if all > 1 {
-        thread_counts.push(all);
-    }
+    let thread_counts = thread_counts(&args.threads, all)?;
+    let threads_said = thread_counts.iter().map(|t| t.to_string()).collect::<Vec<_>>().join(", ");
     let mut md = String::new();
     let mut samples: Vec<Sample> = Vec::new();
     let _ = writeln!(md, "Machine: {}, {all} threads.\n", cpu_model());
-    let _ = writeln!(md, "Throughput in Mrays/s (best of 3 passes after an untimed one; brute: one pass on a 1/32 subset). Threads: 1 and {all}. Build: best of {BUILD_REPS} builds on {all} threads.\n");
-    let _ = writeln!(md, "| scene | prims | backend | build ms | MiB | B/prim | camera 1T | camera {all}T | shadow 1T | shadow {all}T | random 1T | random {all}T |");
-    let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(md, "Throughput in Mrays/s (best of 3 passes after an untimed one; brute: one pass on a 1/32 subset). Threads: {threads_said}. Build: best of {BUILD_REPS} builds on {all} threads.\n");
+    let _ = write!(md, "| scene | prims | backend | build ms | MiB | B/prim |");
+    for rays in ["camera", "shadow", "random"] {
+        for t in &thread_counts {
+            let _ = write!(md, " {rays} {t}T |");
+        }
+    }
+    let _ = writeln!(md, "\n|---|---:|---|---:|---:|---:|{}", "---:|".repeat(3 * thread_counts.len()));
     let mut render_rows = String::new();
     let mut sah_rows = String::new();
     #[allow(unused_mut)]
@@ -516,7 +488,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         }
         for &kind in &contenders {
             if kind == brute && prims > BRUTE_LIMIT {
-                let _ = writeln!(md, "| {} | {} | brute | – | – | – | skipped above {} primitives |", scene.name, prims, BRUTE_LIMIT);
+                let _ = writeln!(md, "| {} | {} | brute | – | – | – | skipped above {} primitives |{}", scene.name, prims, BRUTE_LIMIT, " |".repeat(3 * thread_counts.len() - 1));
                 continue;
             }
             let built = match kind.build(&scene, all) {
@@ -542,10 +514,6 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     samples.push(Sample { scene: scene.name.clone(), rays: label, threads: t, backend: kind, mrays_per_s: m });
                     cells.push(m);
                 }
-            }
-            if thread_counts.len() == 1 {
-                // Keep the table's columns: repeat the single-thread figure.
-                cells = cells.iter().flat_map(|&c| [c, c]).collect();
             }
             if let Some((nodes, leaves)) = a.sah_cost() {
                 let total = nodes + leaves;
@@ -601,6 +569,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let _ = writeln!(md, "\nnative ÷ {other} throughput, from this run:\n");
             md.push_str(&ratios);
         }
+    }
+    if thread_counts.len() > 2 {
+        let _ = writeln!(md, "\nThroughput against threads, Mrays/s, from this run (efficiency: speed-up ÷ thread ratio):\n");
+        md.push_str(&scaling_table(&samples, &thread_counts));
     }
     if !sah_rows.is_empty() {
         let _ = writeln!(
