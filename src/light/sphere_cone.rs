@@ -16,34 +16,23 @@ use std::f32::consts::PI;
 #[derive(Clone, Copy, Debug)]
 pub struct SphereCone {
     p: Vec3,
-    /// Unit axis towards the centre, and a frame around it.
-    w: Vec3,
-    t: Vec3,
-    b: Vec3,
     dist: f32,
     radius: f32,
-    /// sin² θmax, and 1 − cos θmax (by series where θmax is tiny).
+    /// sin² θmax.
     sin2_max: f32,
+    bound: ConeBound,
+}
+
+/// What membership and density need of a cone: its unit axis and
+/// 1 − cos θmax (by series where θmax is tiny). A sixth of `SphereCone`'s
+/// size, for callers that hold many cones and sample few (`GuideAt`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ConeBound {
+    w: Vec3,
     one_minus_cos_max: f32,
 }
 
-impl SphereCone {
-    /// `None` when `p` is not clearly outside the sphere.
-    pub fn new(p: Vec3, center: Vec3, radius: f32) -> Option<SphereCone> {
-        let d = center - p;
-        let dist2 = d.length_squared();
-        if !(dist2 > radius * radius * 1.0001) || !dist2.is_finite() {
-            return None;
-        }
-        let dist = dist2.sqrt();
-        let w = d / dist;
-        let (t, b) = w.any_orthonormal_pair();
-        let sin2_max = radius * radius / dist2;
-        // 1 − sqrt(1 − s) loses everything in f32 for small s: series.
-        let one_minus_cos_max = if sin2_max < 1e-3 { sin2_max * (0.5 + sin2_max / 8.0) } else { 1.0 - (1.0 - sin2_max).sqrt() };
-        Some(SphereCone { p, w, t, b, dist, radius, sin2_max, one_minus_cos_max })
-    }
-
+impl ConeBound {
     /// The cone's solid-angle pdf.
     pub fn pdf(&self) -> f32 {
         1.0 / (2.0 * PI * self.one_minus_cos_max)
@@ -56,17 +45,53 @@ impl SphereCone {
     pub fn contains(&self, w: Vec3) -> bool {
         0.5 * (w - self.w).length_squared() <= self.one_minus_cos_max
     }
+}
+
+impl SphereCone {
+    /// `None` when `p` is not clearly outside the sphere.
+    pub fn new(p: Vec3, center: Vec3, radius: f32) -> Option<SphereCone> {
+        let d = center - p;
+        let dist2 = d.length_squared();
+        if !(dist2 > radius * radius * 1.0001) || !dist2.is_finite() {
+            return None;
+        }
+        let dist = dist2.sqrt();
+        let w = d / dist;
+        let sin2_max = radius * radius / dist2;
+        // 1 − sqrt(1 − s) loses everything in f32 for small s: series.
+        let one_minus_cos_max = if sin2_max < 1e-3 { sin2_max * (0.5 + sin2_max / 8.0) } else { 1.0 - (1.0 - sin2_max).sqrt() };
+        Some(SphereCone { p, dist, radius, sin2_max, bound: ConeBound { w, one_minus_cos_max } })
+    }
+
+    /// The cone's axis and aperture alone.
+    pub fn bound(&self) -> ConeBound {
+        self.bound
+    }
+
+    /// The cone's solid-angle pdf.
+    pub fn pdf(&self) -> f32 {
+        self.bound.pdf()
+    }
+
+    /// Whether unit direction `w` lies in the cone (`ConeBound::contains`).
+    pub fn contains(&self, w: Vec3) -> bool {
+        self.bound.contains(w)
+    }
 
     /// A direction uniform in the cone, and the point where it meets the
     /// sphere (its near side).
     pub fn sample(&self, u: (f32, f32)) -> (Vec3, Vec3) {
         // cos θ uniform in [cos θmax, 1]: 1 − cos θ = u·(1 − cos θmax).
-        let one_minus_cos = u.0 * self.one_minus_cos_max;
+        let ConeBound { w, one_minus_cos_max } = self.bound;
+        // The frame around the axis is made here, not in `new`: most cones
+        // made are only asked `contains` and `pdf`.
+        let (t, b) = w.any_orthonormal_pair();
+        let one_minus_cos = u.0 * one_minus_cos_max;
         let sin2 = (one_minus_cos * (2.0 - one_minus_cos)).min(self.sin2_max);
         let cos = 1.0 - one_minus_cos;
         let sin = sin2.max(0.0).sqrt();
         let phi = 2.0 * PI * u.1;
-        let wi = (self.w * cos + self.t * (sin * phi.cos()) + self.b * (sin * phi.sin())).normalize();
+        let wi = (w * cos + t * (sin * phi.cos()) + b * (sin * phi.sin())).normalize();
         // Distance along wi to the near side: d cos θ − sqrt(r² − d² sin² θ),
         // the root clamped at 0 for rays grazing the rim.
         let along = self.dist * cos - (self.radius * self.radius - self.dist * self.dist * sin2).max(0.0).sqrt();
@@ -94,11 +119,12 @@ mod tests {
                 // Uniform in the cone: 1 − cos θ uniform over [0, 1 − cos θmax].
                 // 1 − cos θ from sin² θ (the tangential part), which f32 keeps
                 // for the far sphere's 1e-6-wide cone where 1 − cos would not.
-                let (ct, cb) = (wi.dot(cone.t) as f64, wi.dot(cone.b) as f64);
+                let (t, b) = cone.bound.w.any_orthonormal_pair();
+                let (ct, cb) = (wi.dot(t) as f64, wi.dot(b) as f64);
                 let sin2 = ct * ct + cb * cb;
                 let one_minus = sin2 / (1.0 + (1.0 - sin2).max(0.0).sqrt());
-                let row = ((one_minus / cone.one_minus_cos_max as f64 * rows as f64) as usize).min(rows - 1);
-                let phi = (wi.dot(cone.b)).atan2(wi.dot(cone.t)).rem_euclid(2.0 * PI);
+                let row = ((one_minus / cone.bound.one_minus_cos_max as f64 * rows as f64) as usize).min(rows - 1);
+                let phi = (wi.dot(b)).atan2(wi.dot(t)).rem_euclid(2.0 * PI);
                 let col = ((phi / (2.0 * PI) * cols as f32) as usize).min(cols - 1);
                 counts[row * cols + col] += 1.0;
             }

@@ -50,7 +50,7 @@ pub(super) enum Term {
 }
 
 /// What every light sample at one vertex shares.
-struct LightsAt<'v> {
+struct LightsAt<'v, 'g> {
     v: &'v Vertex,
     bsdf: Bsdf,
     alone: bool,
@@ -58,7 +58,7 @@ struct LightsAt<'v> {
     /// The path's last vertex (no guided continuation follows).
     last: bool,
     /// The guide's cones here, found by the first MIS weight that needs them.
-    guide: Option<Option<GuideAt>>,
+    guide: Option<Option<GuideAt<'g>>>,
 }
 
 /// One path between bounces.
@@ -78,7 +78,7 @@ struct Path {
     next: Option<(usize, Continuation)>,
 }
 
-impl PathTracer<'_> {
+impl<'a> PathTracer<'a> {
     /// `out[i]` = the radiance along camera ray `rays[i]`, whose closest hit
     /// is `hits[i]`, drawing from `samplers[i]`.
     pub(super) fn wavefront(&self, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
@@ -264,7 +264,7 @@ impl PathTracer<'_> {
     /// light was sampled alone (`PathTracer::alone`): then the BSDF sample
     /// need not look for it.
     #[allow(clippy::too_many_arguments)]
-    fn light_term(&self, at: &mut LightsAt, li: usize, k: u64, n: u32, p_pick: f32, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>) -> bool {
+    fn light_term(&self, at: &mut LightsAt<'_, 'a>, li: usize, k: u64, n: u32, p_pick: f32, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>) -> bool {
         let (v, bsdf) = (at.v, at.bsdf);
         let light = &self.lights.lights[li];
         let mis = !self.hemisphere && light.is_visible();
@@ -393,11 +393,12 @@ impl PathTracer<'_> {
     /// where its continuation is drawn from the guided mixture: not at the
     /// path's last vertex (`last`), not with `-H`, and only with a target
     /// in view.
-    fn guide_at(&self, v: &Vertex, bsdf: &Bsdf, last: bool) -> Option<GuideAt> {
+    fn guide_at(&self, v: &Vertex, bsdf: &Bsdf, last: bool) -> Option<GuideAt<'a>> {
         if !matches!(bsdf, Bsdf::Diffuse(_)) || self.hemisphere || last {
             return None;
         }
-        let at = self.lights.guide.as_ref()?.at(v.it.p, v.ns);
+        let lights: &'a crate::light::Lights = self.lights;
+        let at = lights.guide.as_ref()?.at(v.it.p, v.ns);
         (at.fraction() > 0.0).then_some(at)
     }
 
