@@ -263,6 +263,9 @@ impl<const W: usize> WideBvh<W> {
         let mut sp = 0;
         let mut cur = self.root;
         let (mut wasted, mut useful) = (0u32, 0u32);
+        // Occlusion with one axis permutation for all rays: leaves test 8
+        // rays against one triangle from the packet's own set-up.
+        let shared_axes = if ANY { soa.shared_axes() } else { None };
         loop {
             if wasted > WASTED_LEAF_TESTS && wasted > useful {
                 #[cfg(test)]
@@ -317,6 +320,18 @@ impl<const W: usize> WideBvh<W> {
                     }
                     useful += 1;
                     let leaf = self.leaf_of(node.child[lane]);
+                    if let (true, Some(k)) = (ANY, shared_axes.filter(|_| leaf.n_spheres == 0)) {
+                        let found = self.leaf_rays_x8(&leaf, soa, rays_in, k, &tmax);
+                        let mut f = found;
+                        while f != 0 {
+                            let i = f.trailing_zeros() as usize;
+                            f &= f - 1;
+                            occluded[i] = true;
+                            tmax[i] = f32::NEG_INFINITY;
+                        }
+                        active &= !found;
+                        continue;
+                    }
                     macro_rules! ensure {
                         ($i:expr) => {
                             if setup & (1u64 << $i) == 0 {
@@ -409,6 +424,37 @@ impl<const W: usize> WideBvh<W> {
                 None => return,
             }
         }
+    }
+
+    /// Which of the rays `rays_in` (bits) hit some triangle of a
+    /// triangle-only leaf, for rays sharing the axis permutation `k`: each
+    /// triangle against 8 rays at a time (`RaysSoA::hits_triangle`), rays
+    /// leaving once they hit. Occlusion only: which triangle is not kept.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(super) unsafe fn leaf_rays_x8(&self, leaf: &super::Leaf, soa: &RaysSoA, rays_in: u64, k: [usize; 3], tmax: &[f32; PACKET]) -> u64 {
+        let mut left = rays_in;
+        for gi in leaf.group..leaf.group + leaf.n_groups {
+            let g = &self.groups[gi as usize];
+            let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            for (lane, id) in ids.iter().enumerate() {
+                if id[0] == EMPTY {
+                    continue;
+                }
+                for half in 0..PACKET / 8 {
+                    if (left >> (8 * half)) & 0xff != 0 {
+                        let hit = soa.hits_triangle(g, lane, half, k, tmax) as u64 & (left >> (8 * half)) & 0xff;
+                        left &= !(hit << (8 * half));
+                    }
+                }
+                if left == 0 {
+                    return rays_in;
+                }
+            }
+        }
+        rays_in & !left
     }
 
     /// A triangle-only leaf for rays `ij` together (`intersect_group_x2`),

@@ -68,6 +68,8 @@ impl<const W: usize> WideBvh<W> {
         // Triangle-test constants, made the first time a ray reaches a leaf.
         let mut setup: u32 = 0;
         let mut unused = [None; PACKET];
+        // One axis permutation for all rays: leaves as in `frustum_packet`.
+        let shared_axes = soa.shared_axes();
         // Stack of (node, the rays that entered it, their nearest entry).
         let mut stack = [MaybeUninit::<(u32, u32, f32)>::uninit(); STACK];
         let mut sp = 0;
@@ -108,6 +110,15 @@ impl<const W: usize> WideBvh<W> {
                 // A leaf: the rays that entered it test its triangles, two at
                 // a time where it holds only triangles.
                 let leaf = self.leaf_of(child);
+                if let Some(k) = shared_axes.filter(|_| leaf.n_spheres == 0) {
+                    let mut found = self.leaf_rays_x8(&leaf, soa, r as u64, k, &tmax) as u32;
+                    active &= !found;
+                    while found != 0 {
+                        out[found.trailing_zeros() as usize] = true;
+                        found &= found - 1;
+                    }
+                    continue;
+                }
                 macro_rules! ensure {
                     ($k:expr) => {
                         if setup & (1 << $k) == 0 {

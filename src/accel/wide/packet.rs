@@ -23,7 +23,8 @@
 //! different normalisation.
 
 use super::frustum::PACKET;
-use super::kernels::{Shear, Slab};
+use super::kernels::{scalar_lane, Shear, Slab};
+use super::TriGroup;
 use crate::accel::bvh::ROBUST_SCALE;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
@@ -225,6 +226,96 @@ impl RaysSoA {
         soa
     }
 
+    /// The axis permutation `[kx, ky, kz]` every ray of the packet shares,
+    /// or `None` when their dominant axes or swaps differ. Lanes past the
+    /// packet's rays repeat its first ray, so they never break uniformity.
+    #[inline(always)]
+    pub(super) fn shared_axes(&self) -> Option<[usize; 3]> {
+        let all = (1u32 << PACKET) - 1;
+        let uniform = |m: u32| m & all == 0 || m & all == all;
+        if !(uniform(self.kz0) && uniform(self.kz1) && uniform(self.swap)) {
+            return None;
+        }
+        Some(self.shear(0).1.k)
+    }
+
+    /// Bit r set when ray `8·half + r` hits triangle `lane` of `g` in
+    /// (tmin, `tmax[i]`], for rays sharing the permutation `k`
+    /// (`shared_axes`): the watertight test of `intersect_triangle` with the
+    /// rays in the lanes and one triangle broadcast, where
+    /// `intersect_group_x2` puts two rays against four triangles. Each lane
+    /// does that kernel's operations in its order, and a lane with an exact
+    /// zero edge function is redone by `scalar_lane` as there, so every
+    /// bit is the single-ray test's answer. For occlusion, where the ray
+    /// constants are already here in SoA form: no per-ray set-up.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(super) unsafe fn hits_triangle(&self, g: &TriGroup, lane: usize, half: usize, k: [usize; 3], tmax: &[f32; PACKET]) -> u32 {
+        let b = half * 8;
+        let [kx, ky, kz] = k;
+        let o = |a: usize| _mm256_loadu_ps(self.o[a].as_ptr().add(b));
+        let (ox, oy, oz) = (o(kx), o(ky), o(kz));
+        let (sx, sy, sz) = (_mm256_loadu_ps(self.s[0].as_ptr().add(b)), _mm256_loadu_ps(self.s[1].as_ptr().add(b)), _mm256_loadu_ps(self.s[2].as_ptr().add(b)));
+        let v = |vert: usize, axis: usize| _mm256_set1_ps(g.v[vert][axis][lane]);
+        let axk = _mm256_sub_ps(v(0, kx), ox);
+        let ayk = _mm256_sub_ps(v(0, ky), oy);
+        let azk = _mm256_sub_ps(v(0, kz), oz);
+        let bxk = _mm256_sub_ps(v(1, kx), ox);
+        let byk = _mm256_sub_ps(v(1, ky), oy);
+        let bzk = _mm256_sub_ps(v(1, kz), oz);
+        let cxk = _mm256_sub_ps(v(2, kx), ox);
+        let cyk = _mm256_sub_ps(v(2, ky), oy);
+        let czk = _mm256_sub_ps(v(2, kz), oz);
+        let ax = _mm256_sub_ps(axk, _mm256_mul_ps(sx, azk));
+        let ay = _mm256_sub_ps(ayk, _mm256_mul_ps(sy, azk));
+        let bx = _mm256_sub_ps(bxk, _mm256_mul_ps(sx, bzk));
+        let by = _mm256_sub_ps(byk, _mm256_mul_ps(sy, bzk));
+        let cx = _mm256_sub_ps(cxk, _mm256_mul_ps(sx, czk));
+        let cy = _mm256_sub_ps(cyk, _mm256_mul_ps(sy, czk));
+        let e0 = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+        let e1 = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+        let e2 = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+        let zero = _mm256_setzero_ps();
+        let eq = |a, b| _mm256_cmp_ps::<_CMP_EQ_OQ>(a, b);
+        let lt = |a, b| _mm256_cmp_ps::<_CMP_LT_OS>(a, b);
+        let gt = |a, b| _mm256_cmp_ps::<_CMP_GT_OS>(a, b);
+        let any_zero = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(eq(e0, zero), eq(e1, zero)), eq(e2, zero))) as u32;
+        let neg = _mm256_or_ps(_mm256_or_ps(lt(e0, zero), lt(e1, zero)), lt(e2, zero));
+        let pos = _mm256_or_ps(_mm256_or_ps(gt(e0, zero), gt(e1, zero)), gt(e2, zero));
+        let det = _mm256_add_ps(_mm256_add_ps(e0, e1), e2);
+        let abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+        let finite = lt(_mm256_and_ps(det, abs_mask), _mm256_set1_ps(f32::INFINITY));
+        let mut ok = _mm256_andnot_ps(_mm256_and_ps(neg, pos), _mm256_and_ps(finite, _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero)));
+        let az = _mm256_mul_ps(sz, azk);
+        let bz = _mm256_mul_ps(sz, bzk);
+        let cz = _mm256_mul_ps(sz, czk);
+        let ts = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(e0, az), _mm256_mul_ps(e1, bz)), _mm256_mul_ps(e2, cz));
+        let behind = _mm256_or_ps(
+            _mm256_and_ps(gt(det, zero), _mm256_cmp_ps::<_CMP_LE_OS>(ts, zero)),
+            _mm256_and_ps(lt(det, zero), _mm256_cmp_ps::<_CMP_GE_OS>(ts, zero)),
+        );
+        ok = _mm256_andnot_ps(behind, ok);
+        let mut mask = _mm256_movemask_ps(ok) as u32 & !any_zero;
+        if mask != 0 {
+            let t = _mm256_mul_ps(ts, _mm256_div_ps(_mm256_set1_ps(1.0), det));
+            let tmin = _mm256_loadu_ps(self.tmin.as_ptr().add(b));
+            let tmax = _mm256_loadu_ps(tmax.as_ptr().add(b));
+            mask &= _mm256_movemask_ps(_mm256_and_ps(gt(t, tmin), _mm256_cmp_ps::<_CMP_LE_OS>(t, tmax))) as u32;
+        }
+        let mut z = any_zero & 0xff;
+        while z != 0 {
+            let r = z.trailing_zeros() as usize;
+            z &= z - 1;
+            let i = b + r;
+            if scalar_lane(g, lane, &self.shear(i).0, self.tmin[i], tmax[i]).is_some() {
+                mask |= 1 << r;
+            }
+        }
+        mask
+    }
+
     /// Ray `i`'s watertight-test constants, as `RayTransform::new` and
     /// `Shear::new` make them.
     #[inline(always)]
@@ -368,5 +459,91 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `hits_triangle` answers exactly as the single-ray watertight test,
+    /// bit for bit: rays through the triangles' vertices and along their
+    /// shared edge (exact-zero edge functions, redone in f64), rays ending
+    /// exactly at their hit or one ulp before it, a degenerate triangle,
+    /// rays beside them; packets of every length.
+    #[test]
+    fn eight_rays_against_one_triangle_equal_the_single_ray_test() {
+        if !is_x86_feature_detected!("avx2") {
+            eprintln!("SKIPPED eight_rays_against_one_triangle_equal_the_single_ray_test: no AVX2 on this CPU");
+            return;
+        }
+        // Two triangles sharing the edge (1,0,0)-(0,1,0) in the plane z = 0,
+        // a tilted one and a degenerate one (all three points on a line).
+        let tris = [
+            [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0)],
+            [Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)],
+            [Vec3::new(-0.3, 0.2, -0.4), Vec3::new(1.7, 0.1, 0.6), Vec3::new(0.4, 1.9, 0.2)],
+            [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.5, 0.5, 0.0), Vec3::new(1.0, 1.0, 0.0)],
+        ];
+        let mut g = TriGroup { v: [[[0.0; 4]; 3]; 3] };
+        for (lane, t) in tris.iter().enumerate() {
+            for (vert, p) in t.iter().enumerate() {
+                for a in 0..3 {
+                    g.v[vert][a][lane] = p[a];
+                }
+            }
+        }
+        let mut rng = Rng::new(41, 2);
+        let mut rays = Vec::new();
+        // Straight down onto the shared edge, the vertices and the corners.
+        for k in 0..=16 {
+            let f = k as f32 / 16.0;
+            for target in [Vec3::new(f, 1.0 - f, 0.0), Vec3::new(f, 0.0, 0.0), Vec3::new(0.0, f, 0.0), Vec3::new(f, f, 0.0)] {
+                rays.push(Ray::new(target + Vec3::new(0.0, 0.0, 3.0), Vec3::new(0.0, 0.0, -1.0)));
+            }
+        }
+        // From one point above, at vertices, edges, inside and beside.
+        let eye = Vec3::new(0.3, 0.4, 5.0);
+        for _ in 0..600 {
+            let t = &tris[(rng.uniform() * 4.0) as usize % 4];
+            let (a, b) = (rng.uniform(), rng.uniform());
+            let target = match (rng.uniform() * 4.0) as u32 {
+                0 => t[(a * 3.0) as usize % 3],
+                1 => t[0] + (t[1] - t[0]) * a,
+                2 => t[0] * (1.0 - a.sqrt()) + t[1] * (a.sqrt() * (1.0 - b)) + t[2] * (a.sqrt() * b),
+                _ => t[0] + (t[1] - t[0]) * (a * 2.5 - 0.7) + (t[2] - t[0]) * (b * 2.5 - 0.7),
+            };
+            rays.push(Ray::new(eye, target - eye));
+        }
+        // Ranges ending exactly at a hit and one ulp before it.
+        let with_hits: Vec<Ray> = rays
+            .iter()
+            .flat_map(|r| {
+                let rt = RayTransform::new(r.origin, r.dir);
+                tris.iter().filter_map(move |t| crate::geometry::intersect_triangle(&rt, t[0], t[1], t[2], 0.0, f32::INFINITY)).map(|h| h.0).collect::<Vec<_>>().into_iter().flat_map(move |t| {
+                    [Ray::with_range(r.origin, r.dir, 0.0, t), Ray::with_range(r.origin, r.dir, 0.0, f32::from_bits(t.to_bits() - 1))]
+                })
+            })
+            .collect();
+        rays.extend(with_hits);
+        let (mut tested, mut hits) = (0usize, 0usize);
+        for len in [PACKET, 11, 3] {
+            for p in rays.chunks(len) {
+                let soa = unsafe { RaysSoA::new(p) };
+                let Some(k) = soa.shared_axes() else { continue };
+                for lane in 0..4 {
+                    for half in 0..PACKET / 8 {
+                        let got = unsafe { soa.hits_triangle(&g, lane, half, k, &soa.tmax) };
+                        for r in 0..8 {
+                            let i = 8 * half + r;
+                            if i >= p.len() {
+                                continue;
+                            }
+                            let rt = RayTransform::new(p[i].origin, p[i].dir);
+                            let want = scalar_lane(&g, lane, &rt, p[i].tmin, p[i].tmax).is_some();
+                            assert_eq!(got >> r & 1 != 0, want, "ray {:?} against triangle {lane}", p[i]);
+                            tested += 1;
+                            hits += want as usize;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(tested > 5000 && hits > 1000, "too few cases: {tested} tested, {hits} hits");
     }
 }
