@@ -26,6 +26,7 @@
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
 use crate::bsdf::Bsdf;
+use crate::light::specular_guide::GuideAt;
 use crate::light::{emitted, Lights};
 use crate::ray::Ray;
 use crate::sampler::Sampler;
@@ -152,9 +153,9 @@ impl PathTracer<'_> {
     /// wavefront's terms (`direct_terms`), their rays traced one by one.
     /// Also whether the vertex's BSDF sample can still find light (see
     /// `direct_terms`).
-    fn direct(&self, v: &Vertex, bounce: u32, sampler: &mut Sampler, rays: &mut u64) -> (Vec3, bool) {
+    fn direct(&self, v: &Vertex, bounce: u32, guide: Option<&GuideAt>, sampler: &mut Sampler, rays: &mut u64) -> (Vec3, bool) {
         let (mut terms, mut shadow, mut closest) = (Vec::new(), Vec::new(), Vec::new());
-        let bsdf_finds_light = self.direct_terms(v, bounce, sampler, &mut terms, &mut shadow, &mut closest);
+        let bsdf_finds_light = self.direct_terms(v, bounce, guide, sampler, &mut terms, &mut shadow, &mut closest);
         *rays += (shadow.len() + closest.len()) as u64;
         let occluded: Vec<bool> = shadow.iter().map(|r| self.accel.occluded(r)).collect();
         let found: Vec<Option<Hit>> = closest.iter().map(|r| self.accel.intersect(r)).collect();
@@ -190,14 +191,15 @@ impl Integrator for PathTracer<'_> {
             let count = counts(bounce);
             sampler.set_bounce(bounce);
             let mut seeks_light = false;
+            let guide = self.guide_at(&v, bounce);
             if count {
-                let (d, finds) = self.direct(&v, bounce, sampler, rays);
+                let (d, finds) = self.direct(&v, bounce, guide.as_ref(), sampler, rays);
                 l += beta * d;
                 seeks_light = finds;
             }
             // With MIS the last vertex still needs its BSDF sample: the light
             // it finds is part of this bounce's direct light.
-            let Some(c) = self.continuation(&v, bounce, seeks_light, beta, radiance_scale, sampler) else { break };
+            let Some(c) = self.continuation(&v, bounce, guide.as_ref(), seeks_light, beta, radiance_scale, sampler) else { break };
             let last = bounce == m;
             let ray = v.it.spawn_ray(c.wi);
             let gather = count && (!self.hemisphere || c.delta);

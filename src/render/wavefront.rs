@@ -55,10 +55,10 @@ struct LightsAt<'v, 'g> {
     bsdf: Bsdf,
     alone: bool,
     env_normal: Option<Vec3>,
-    /// The path's last vertex (no guided continuation follows).
+    /// The path's last vertex.
     last: bool,
-    /// The guide's cones here, found by the first MIS weight that needs them.
-    guide: Option<Option<GuideAt<'g>>>,
+    /// The guide's cones here: the continuation's pdf is their mixture.
+    guide: Option<&'v GuideAt<'g>>,
 }
 
 /// One path between bounces.
@@ -130,9 +130,12 @@ impl<'a> PathTracer<'a> {
                 sampler.set_bounce(p.bounce);
                 let first = terms.len();
                 p.counted = counts(p.bounce);
-                let seeks_light = p.counted && self.direct_terms(v, p.bounce, sampler, &mut terms, &mut shadow, &mut closest);
+                // Found once for the light samples' MIS weights and the
+                // continuation that draws from it.
+                let guide = self.guide_at(v, p.bounce);
+                let seeks_light = p.counted && self.direct_terms(v, p.bounce, guide.as_ref(), sampler, &mut terms, &mut shadow, &mut closest);
                 p.terms = first..terms.len();
-                p.next = self.continuation(v, p.bounce, seeks_light, p.beta, p.radiance_scale, sampler).map(|c| {
+                p.next = self.continuation(v, p.bounce, guide.as_ref(), seeks_light, p.beta, p.radiance_scale, sampler).map(|c| {
                     closest.push(v.it.spawn_ray(c.wi));
                     (closest.len() - 1, c)
                 });
@@ -198,16 +201,17 @@ impl<'a> PathTracer<'a> {
     /// hemisphere samples for the lights a ray can hit. Returns whether the
     /// vertex's BSDF sample can still add light (some light a ray can hit is
     /// not sampled alone here, or the BSDF is a delta).
-    pub(super) fn direct_terms(&self, v: &Vertex, bounce: u32, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) -> bool {
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn direct_terms(&self, v: &Vertex, bounce: u32, guide: Option<&GuideAt<'a>>, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>, closest: &mut Vec<Ray>) -> bool {
         // Delta BSDFs see lights only through their sampled ray.
         let Some(bsdf) = v.bsdf.filter(|b| !b.is_delta()) else { return true };
-        let mut at = LightsAt {
+        let at = LightsAt {
             v,
             bsdf,
             alone: self.alone(&bsdf),
             env_normal: self.env_normal(&bsdf, v),
             last: bounce == self.max_depth,
-            guide: None,
+            guide,
         };
         if let Some(picker) = self.lights.pick.as_ref().filter(|_| !self.hemisphere) {
             // One light per sample, picked by its estimate here (`light::pick`).
@@ -219,7 +223,7 @@ impl<'a> PathTracer<'a> {
                 // its own would see only the samples that pick it, a random
                 // subset of their stratified sequence.
                 let li = pick::pick(&prob, count, sampler.slot_1d(dim::LIGHT_PICK, j as u64));
-                self.light_term(&mut at, li, j as u64, n, prob[li], sampler, terms, shadow);
+                self.light_term(&at, li, j as u64, n, prob[li], sampler, terms, shadow);
             }
             terms.push(Term::Group { n });
             // Only the last vertex asks whether its BSDF sample can still
@@ -234,7 +238,7 @@ impl<'a> PathTracer<'a> {
             for j in 0..n {
                 // Light li's sample j: its own slots, whatever other lights drew.
                 let slot = li as u64 * self.light_samples as u64 + j as u64;
-                let by_itself = self.light_term(&mut at, li, slot, n, 1.0, sampler, terms, shadow);
+                let by_itself = self.light_term(&at, li, slot, n, 1.0, sampler, terms, shadow);
                 bsdf_finds_light |= light.is_visible() && !by_itself;
             }
             terms.push(Term::Group { n });
@@ -264,7 +268,7 @@ impl<'a> PathTracer<'a> {
     /// light was sampled alone (`PathTracer::alone`): then the BSDF sample
     /// need not look for it.
     #[allow(clippy::too_many_arguments)]
-    fn light_term(&self, at: &mut LightsAt<'_, 'a>, li: usize, k: u64, n: u32, p_pick: f32, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>) -> bool {
+    fn light_term(&self, at: &LightsAt<'_, 'a>, li: usize, k: u64, n: u32, p_pick: f32, sampler: &mut Sampler, terms: &mut Vec<Term>, shadow: &mut Vec<Ray>) -> bool {
         let (v, bsdf) = (at.v, at.bsdf);
         let light = &self.lights.lights[li];
         let mis = !self.hemisphere && light.is_visible();
@@ -297,10 +301,8 @@ impl<'a> PathTracer<'a> {
         let pdf = p_pick * s.pdf;
         let w = if mis && !by_itself {
             // Against the pdf of the continuation this vertex will draw:
-            // the guided mixture where it applies (its cones found on the
-            // first MIS weight; lights sampled alone need none).
-            let (last, guide) = (at.last, &mut at.guide);
-            let p_bsdf = match guide.get_or_insert_with(|| self.guide_at(v, &bsdf, last)) {
+            // the guided mixture where it applies.
+            let p_bsdf = match at.guide {
                 Some(g) => guided_pdf(g, wi, s.wi, None),
                 None => bsdf.pdf(v.wo, wi),
             };
@@ -345,9 +347,10 @@ impl<'a> PathTracer<'a> {
     /// The last vertex samples its BSDF only to find emitters: with MIS
     /// (its share of the direct light) or behind a delta BSDF (the only way
     /// to see light there), and only when `seeks_light`: its bounce counts
-    /// and `direct_terms` left it light to find.
+    /// and `direct_terms` left it light to find. `guide`: the vertex's
+    /// `guide_at`.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, seeks_light: bool, beta: Vec3, radiance_scale: f32, sampler: &mut Sampler) -> Option<Continuation> {
+    pub(super) fn continuation(&self, v: &Vertex, bounce: u32, guide: Option<&GuideAt>, seeks_light: bool, beta: Vec3, radiance_scale: f32, sampler: &mut Sampler) -> Option<Continuation> {
         let last = bounce == self.max_depth;
         let bsdf = v.bsdf?;
         if last && (!seeks_light || (self.hemisphere && !bsdf.is_delta())) {
@@ -357,7 +360,7 @@ impl<'a> PathTracer<'a> {
         let (lobe, dir) = bsdf.draws();
         let lobe = if lobe { sampler.slot_1d(dim::BSDF_LOBE, 0) } else { 0.0 };
         let u = if dir { sampler.slot_2d(dim::BSDF, 0) } else { (0.0, 0.0) };
-        let (s, wi) = match self.guided(v, &bsdf, last, sampler, u) {
+        let (s, wi) = match self.guided(v, &bsdf, guide, sampler, u) {
             Some(guided) => guided?,
             None => {
                 let s = bsdf.sample_with(v.wo, lobe, u)?;
@@ -389,12 +392,12 @@ impl<'a> PathTracer<'a> {
         Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale, alone: self.alone(&bsdf), env_normal: self.env_normal(&bsdf, v) })
     }
 
-    /// The guide's cones from diffuse vertex `v` (`light::specular_guide`),
-    /// where its continuation is drawn from the guided mixture: not at the
-    /// path's last vertex (`last`), not with `-H`, and only with a target
-    /// in view.
-    fn guide_at(&self, v: &Vertex, bsdf: &Bsdf, last: bool) -> Option<GuideAt<'a>> {
-        if !matches!(bsdf, Bsdf::Diffuse(_)) || self.hemisphere || last {
+    /// The guide's cones from diffuse vertex `v` at `bounce`
+    /// (`light::specular_guide`), where its continuation is drawn from the
+    /// guided mixture: not at the path's last vertex, not with `-H`, and
+    /// only with a target in view.
+    pub(super) fn guide_at(&self, v: &Vertex, bounce: u32) -> Option<GuideAt<'a>> {
+        if !matches!(v.bsdf, Some(Bsdf::Diffuse(_))) || self.hemisphere || bounce == self.max_depth {
             return None;
         }
         let lights: &'a crate::light::Lights = self.lights;
@@ -404,13 +407,13 @@ impl<'a> PathTracer<'a> {
 
     /// A diffuse vertex's continuation from the mixture of its cosine lobe
     /// and cones towards the scene's specular and glossy objects: `None`
-    /// where the guide does not apply (`guide_at`), else the sample
+    /// where the guide does not apply (no `guide`: see `guide_at`), else the sample
     /// (`Some(None)`: the direction is below the surface). The lobe's slot
     /// picks the strategy and the target (diffuse sampling does not use
     /// it), the direction's slot draws the direction either way.
-    fn guided(&self, v: &Vertex, bsdf: &Bsdf, last: bool, sampler: &mut Sampler, u: (f32, f32)) -> Option<Option<(BsdfSample, Vec3)>> {
+    fn guided(&self, v: &Vertex, bsdf: &Bsdf, guide: Option<&GuideAt>, sampler: &mut Sampler, u: (f32, f32)) -> Option<Option<(BsdfSample, Vec3)>> {
         let Bsdf::Diffuse(d) = bsdf else { return None };
-        let at = self.guide_at(v, bsdf, last)?;
+        let at = guide?;
         let q = at.fraction();
         let pick = sampler.slot_1d(dim::BSDF_LOBE, 0);
         let (wi, from) = if pick < q {
@@ -423,7 +426,7 @@ impl<'a> PathTracer<'a> {
         if !(local.z > 0.0) {
             return Some(None);
         }
-        let pdf = guided_pdf(&at, local, wi, from);
+        let pdf = guided_pdf(at, local, wi, from);
         if !(pdf > 0.0) || !pdf.is_finite() {
             return Some(None);
         }
