@@ -346,10 +346,20 @@ fn write_leaves<const W: usize>(
     let base = p.base;
     let (mut g, mut r, mut s) = (0usize, 0usize, 0usize);
     let mut codes = Vec::with_capacity(p.part.leaves.len());
+    let mut sorted: Vec<(f32, Prim)> = Vec::new();
     for leaf in &p.part.leaves {
         let run = &refs[leaf.first as usize..leaf.first as usize + leaf.count as usize];
         let (group, sphere) = (base.groups + g as u32, base.spheres + s as u32);
-        let mut tris = run.iter().map(|x| prims.get(x.index())).filter(|q| !q.is_sphere()).peekable();
+        // Largest triangles first: a shadow packet tests its rays against
+        // a leaf's triangles one at a time (`leaf_rays_x8`) and stops once
+        // all are occluded, and a large triangle occludes more of them.
+        // Measured (1 thread, best of 7, three alternating pairs): arch:500k
+        // shadow rays 32.8-33.5 -> 35.2-35.3 Mrays/s; other scenes and ray
+        // kinds within noise; sphere 1M build 156-174 -> 153-166 ms (noise).
+        sorted.clear();
+        sorted.extend(run.iter().map(|x| prims.get(x.index())).filter(|q| !q.is_sphere()).map(|q| ((q.v[1] - q.v[0]).cross(q.v[2] - q.v[0]).length_squared(), q)));
+        sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut tris = sorted.iter().map(|x| x.1).peekable();
         while let Some(first) = tris.peek().copied() {
             let mut tg = TriGroup { v: [[[0.0; LANES]; 3]; 3] };
             for lane in 0..LANES {
