@@ -219,8 +219,13 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    /// Intersect a leaf; `visit(hit)` returns true to stop.
-    #[inline]
+    /// Intersect a leaf; `visit(hit)` returns true to stop. Always inlined:
+    /// out of line (the compiler's choice with `#[inline]`) it was compiled
+    /// without AVX and cost a call per leaf. Inlined, 1 thread, random rays,
+    /// three alternating runs: CBbunny 11.34-11.49 -> 11.84-12.23 Mrays/s
+    /// (its leaves were 38 % of the profile), cow 9.62-9.72 -> 9.78-9.91,
+    /// maxplanck and beetle within noise; camera and shadow rays unchanged.
+    #[inline(always)]
     fn leaf<F: FnMut(Hit) -> bool>(&self, leaf: &Leaf, ray: &Ray, rt: &RayTransform, shear: &Shear, tmax: f32, visit: &mut F) -> bool {
         for gi in leaf.group..leaf.group + leaf.n_groups {
             let g = &self.groups[gi as usize];
