@@ -15,6 +15,30 @@ use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use std::mem::MaybeUninit;
 
+/// Structures at least this large trace incoherent batches interleaved.
+/// Random rays, 4 in flight against 1 (`pathtracer bench`, 2-core EPYC with
+/// 32 MiB of L3): 1M triangles (68 MB) +23 %, 400k (26 MB) +17 %, 200k
+/// (13 MB) -4 %, CBbunny (1.7 MB) -32 %: below this size the walkers' extra
+/// state costs more than the overlapped misses save.
+pub(super) const INTERLEAVE_BYTES: usize = 16 << 20;
+
+/// Size is not enough: what interleaving overlaps is cache misses, and a
+/// large structure whose rays mostly stay in a small part of it misses
+/// little. So a structure is also interleaved only when a ray is expected
+/// to fetch at least `COLD_LINES` cache lines from outside its `HOT_ITEMS`
+/// most likely nodes and leaves (`cold_lines`; 4096 nodes are 1 MiB, this
+/// EPYC's L2 per core). Measured (1 thread, random rays, Mrays/s, two runs
+/// each, interleaved against single rays; cold lines in brackets): sphere
+/// 400k 3.63-3.75 against 2.96-3.06 (18.5), sphere 1M 3.33-3.38 /
+/// 2.82-2.88 (21.2), sphere 5M 2.42-2.58 / 1.79-2.02 (29.9), grass 2M
+/// 0.41-0.44 / 0.32-0.35 (288), subdiv bunny 1.5M 6.97-7.17 / 6.50-6.80
+/// (8.1); but arch 2M 16.80-16.90 / 18.82-18.83 (0.37), arch 10M
+/// 15.64-15.68 / 17.13-17.56 (0.86), stadium 2M 7.83-7.85 / 8.81-8.89
+/// (1.5): the teapot-in-a-stadium and architecture scenes are mostly large
+/// triangles over empty space, whose few nodes stay cached.
+pub(super) const HOT_ITEMS: usize = 4096;
+pub(super) const COLD_LINES: f64 = 3.0;
+
 /// Rays in flight per thread: 4 measured best of 2, 4 and 8 for random
 /// rays on the 1M-triangle mesh.
 const IN_FLIGHT: usize = 4;
@@ -53,6 +77,13 @@ impl Walker {
 }
 
 impl<const W: usize> WideBvh<W> {
+    /// Whether incoherent batches gain from interleaving on this tree: it
+    /// is large, and its rays are expected to miss the caches.
+    pub(super) fn interleave_pays(&self) -> bool {
+        use super::Traversal;
+        self.memory_bytes() >= INTERLEAVE_BYTES && self.cold_lines(HOT_ITEMS).0 >= COLD_LINES
+    }
+
     /// `hits[i]` = the closest hit of `rays[i]`, `IN_FLIGHT` rays at a time.
     ///
     /// # Safety

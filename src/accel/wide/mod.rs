@@ -6,8 +6,9 @@
 //!
 //! Traversal modes: single rays front to back (any-hit rays skip the
 //! sorting, since any hit will do); coherent batches as 16-ray frusta
-//! (`frustum`); incoherent batches over structures larger than the caches
-//! with 4 rays interleaved (`interleave`).
+//! (`frustum`); incoherent batches over large structures whose rays are
+//! expected to miss the caches (`cost`) with 4 rays interleaved
+//! (`interleave`).
 //!
 //! Every lane performs exactly the scalar operations of `intersect_triangle`
 //! and of a scalar slab test, in the same order, so answers are
@@ -15,6 +16,7 @@
 //! whatever the instruction set. Other targets run the scalar lane loops,
 //! which give the same answers.
 
+mod cost;
 mod frustum;
 mod interleave;
 mod kernels;
@@ -109,22 +111,6 @@ pub struct WideBvh<const W: usize> {
     interleave: bool,
 }
 
-/// The two halves of the SAH cost: the node part depends on the width (an
-/// 8-wide tree has about half the nodes of a 4-wide one), the leaf part on how
-/// well the build grouped the primitives.
-#[derive(Clone, Copy, Debug, Default)]
-struct SahCost {
-    nodes: f64,
-    leaves: f64,
-}
-
-/// Structures at least this large trace incoherent batches interleaved.
-/// Random rays, 4 in flight against 1 (`pathtracer bench`, 2-core EPYC with
-/// 32 MiB of L3): 1M triangles (68 MB) +23 %, 400k (26 MB) +17 %, 200k
-/// (13 MB) -4 %, CBbunny (1.7 MB) -32 %: below this size the walkers' extra
-/// state costs more than the overlapped misses save.
-const INTERLEAVE_BYTES: usize = 16 << 20;
-
 /// Whether this CPU runs the AVX2 box test (and the caller did not ask for SSE2).
 fn avx_available() -> bool {
     #[cfg(target_arch = "x86_64")]
@@ -170,43 +156,8 @@ impl<const W: usize> WideBvh<W> {
             (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, &prims);
         }
         let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), avx512: W == 8 && avx512_requested(), interleave: false };
-        b.interleave = b.avx && b.memory_bytes() >= INTERLEAVE_BYTES;
+        b.interleave = b.avx && b.interleave_pays();
         b
-    }
-
-    /// SAH cost of the built tree, as Embree's BVH statistics (`verbose=2`)
-    /// count it: expected node visits and expected 4-triangle group (or
-    /// sphere) tests for a ray through the root's box, traversal and
-    /// intersection costs both 1.
-    fn sah(&self) -> SahCost {
-        if self.root == EMPTY {
-            return SahCost::default();
-        }
-        self.sah_cost(self.root, self.root_area)
-    }
-
-    /// Surface-area-weighted cost of the subtree `code` (whose box has half
-    /// area `area`), relative to a root of half area `root`.
-    fn sah_cost(&self, code: u32, root: f64) -> SahCost {
-        let root = root.max(f64::MIN_POSITIVE);
-        let mut cost = SahCost::default();
-        let mut stack = vec![(code, root)];
-        while let Some((c, area)) = stack.pop() {
-            if c & LEAF_BIT != 0 {
-                let l = self.leaf_of(c);
-                cost.leaves += area / root * (l.n_groups + l.n_spheres) as f64;
-                continue;
-            }
-            cost.nodes += area / root; // one visit tests all W child boxes
-            let n = &self.nodes[c as usize];
-            for lane in 0..W {
-                if n.child[lane] != EMPTY {
-                    let e = [0, 1, 2].map(|a| (n.bounds[3 + a][lane] - n.bounds[a][lane]).max(0.0) as f64);
-                    stack.push((n.child[lane], e[0] * e[1] + e[1] * e[2] + e[2] * e[0]));
-                }
-            }
-        }
-        cost
     }
 
     /// The leaf a child code (with `LEAF_BIT`) stands for.
