@@ -213,7 +213,7 @@ impl<const W: usize> WideBvh<W> {
             }
             let soa = RaysSoA::new(r);
             match Frustum::of(&soa, false) {
-                Some(f) => self.frustum_packet::<false, WIDE>(&f, &soa, r, h, &mut unused),
+                Some(f) => self.frustum_packet::<false, WIDE>(&f, &soa, r, h, &mut unused, super::ChildOrder::NearestFirst),
                 None => self.closest_all::<true>(r, h),
             }
         }
@@ -223,16 +223,17 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     unsafe fn any_packets<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool]) {
         let mut unused = [None; PACKET];
+        let order = self.any_order::<true>(rays);
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             if self.root & LEAF_BIT != 0 || r.len() < 2 {
-                self.any_all::<true>(r, o);
+                self.any_all_ordered::<true>(r, o, order);
                 continue;
             }
             let soa = RaysSoA::new(r);
             match Frustum::of(&soa, true) {
-                Some(f) => self.frustum_packet::<true, WIDE>(&f, &soa, r, &mut unused, o),
+                Some(f) => self.frustum_packet::<true, WIDE>(&f, &soa, r, &mut unused, o, order),
                 // Fanned out or of mixed signs: a ray mask per node.
-                None => self.any_masked(&soa, r, o),
+                None => self.any_masked(&soa, r, o, order),
             }
         }
     }
@@ -241,7 +242,7 @@ impl<const W: usize> WideBvh<W> {
     /// (rays leave the packet once occluded). `WIDE`: with the AVX-512
     /// kernels (16 rays per leaf box test, 4 per triangle group test).
     #[inline(always)]
-    unsafe fn frustum_packet<const ANY: bool, const WIDE: bool>(&self, f: &Frustum, soa: &RaysSoA, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool]) {
+    pub(super) unsafe fn frustum_packet<const ANY: bool, const WIDE: bool>(&self, f: &Frustum, soa: &RaysSoA, rays: &[Ray], hits: &mut [Option<Hit>], occluded: &mut [bool], order: super::ChildOrder) {
         let n = rays.len();
         // The triangle-test constants are copied out of the set-up the
         // first time a ray reaches a leaf.
@@ -276,7 +277,7 @@ impl<const W: usize> WideBvh<W> {
                 for i in 0..n {
                     if ANY {
                         if active & (1u64 << i) != 0 {
-                            occluded[i] = self.any::<true>(&rays[i]);
+                            occluded[i] = self.any::<true>(&rays[i], order);
                         }
                     } else {
                         let r = Ray { tmax: tmax[i], ..rays[i] };
@@ -412,9 +413,9 @@ impl<const W: usize> WideBvh<W> {
             }
             let inner = mask & !leaves;
             if inner != 0 {
-                // Any hit: farthest first (see `ChildOrder`); a packet
-                // stops only once every ray is occluded.
-                let order = if ANY { super::ChildOrder::FarthestFirst } else { super::ChildOrder::NearestFirst };
+                // `order`: nearest first for the closest hit, the batch's
+                // choice for any hit (`any_order`); a packet stops only
+                // once every ray is occluded.
                 sp = self.push_children(node, inner, &near, &mut stack, sp, order);
             }
             // Pop the nearest child that may still hold a closer hit (the

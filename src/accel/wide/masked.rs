@@ -35,7 +35,7 @@ impl<const W: usize> WideBvh<W> {
     /// The CPU must have AVX2 and the caller must be compiled with it; `W`
     /// must be 8.
     #[inline(always)]
-    pub(super) unsafe fn any_masked(&self, soa: &RaysSoA, rays: &[Ray], out: &mut [bool]) {
+    pub(super) unsafe fn any_masked(&self, soa: &RaysSoA, rays: &[Ray], out: &mut [bool], order: super::ChildOrder) {
         use std::arch::x86_64::*;
         debug_assert!(W == 8 && rays.len() <= PACKET);
         let n = rays.len();
@@ -60,7 +60,7 @@ impl<const W: usize> WideBvh<W> {
         if self.root & LEAF_BIT != 0 {
             for i in 0..n {
                 if active & (1 << i) != 0 {
-                    out[i] = self.any::<true>(&rays[i]);
+                    out[i] = self.any::<true>(&rays[i], order);
                 }
             }
             return;
@@ -153,8 +153,12 @@ impl<const W: usize> WideBvh<W> {
                     return;
                 }
             }
-            // The farthest entered child on top (see `ChildOrder`).
-            sort_far_first(std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, u32, f32), sp - base), |e| -e.2);
+            // The child `order` visits next on top (see `ChildOrder`).
+            let pushed = std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, u32, f32), sp - base);
+            match order {
+                super::ChildOrder::FarthestFirst => sort_far_first(pushed, |e| -e.2),
+                super::ChildOrder::NearestFirst => sort_far_first(pushed, |e| e.2),
+            }
             // Pop the next node some still-unoccluded ray entered.
             loop {
                 if sp == 0 {

@@ -1,7 +1,6 @@
 //! Unit tests of the wide BVH: every width, instruction set and traversal
 //! mode against brute force, and the SIMD kernels against the scalar code.
 
-use super::interleave::{COLD_LINES, HOT_ITEMS};
 use super::kernels::intersect_group_scalar;
 use super::*;
 use glam::Vec3;
@@ -12,7 +11,7 @@ use crate::rng::Rng;
 use crate::scene::TriangleMesh;
 
 /// A small mesh with a sphere inside it, so leaves hold both kinds.
-fn shapes() -> Vec<Shape> {
+pub(super) fn shapes() -> Vec<Shape> {
     let mut shapes = procedural_scene(3000).shapes;
     shapes.push(Shape::Sphere { center: Vec3::new(0.1, 0.0, 0.2), radius: 0.3 });
     shapes
@@ -20,7 +19,7 @@ fn shapes() -> Vec<Shape> {
 
 /// Packets of 16 nearly parallel rays from nearly the same point, so
 /// most pass `Frustum::new`; every fourth packet spreads wider.
-fn tight_packets(n: usize, seed: u64) -> Vec<Ray> {
+pub(super) fn tight_packets(n: usize, seed: u64) -> Vec<Ray> {
     let mut rng = Rng::new(seed, 1);
     let mut rays = Vec::new();
     for p in 0..n {
@@ -36,7 +35,7 @@ fn tight_packets(n: usize, seed: u64) -> Vec<Ray> {
     rays
 }
 
-fn rays(shapes: &[Shape]) -> Vec<Ray> {
+pub(super) fn rays(shapes: &[Shape]) -> Vec<Ray> {
     let mut scene = procedural_scene(3000);
     scene.shapes = shapes.to_vec();
     let mut rays = camera_rays(&Camera::from_scene(&scene), 64, 48);
@@ -496,78 +495,31 @@ fn masked_shadow_packets_match_brute_force() {
         return;
     }
     #[target_feature(enable = "avx2")]
-    unsafe fn masked(bvh: &WideBvh<8>, rays: &[Ray]) -> Vec<bool> {
+    unsafe fn masked(bvh: &WideBvh<8>, rays: &[Ray], order: ChildOrder) -> Vec<bool> {
         let mut out = vec![true; rays.len()];
         for (r, o) in rays.chunks(frustum::PACKET).zip(out.chunks_mut(frustum::PACKET)) {
-            bvh.any_masked(&super::packet::RaysSoA::new(r), r, o);
+            bvh.any_masked(&super::packet::RaysSoA::new(r), r, o, order);
         }
         out
     }
-    let shapes = shapes();
-    let rays = rays(&shapes);
-    let brute = BruteForce::new(&shapes);
-    let bvh = WideBvh::<8>::build(&shapes);
-    // SAFETY: the CPU has AVX2 (checked above).
-    let got = unsafe { masked(&bvh, &rays) };
-    let bad = rays.iter().zip(&got).filter(|(r, o)| brute.occluded(r) != **o).count();
-    assert_eq!(bad, 0, "masked packets: occlusion mismatches against brute force");
-    assert!(got.iter().any(|o| *o) && got.iter().any(|o| !*o), "the rays must be partly occluded for the test to mean anything");
-    let scene = crate::bench::load_bench_scene("arch:100k").unwrap();
-    let bvh = WideBvh::<8>::build(&scene.shapes);
-    let cam = camera_rays(&crate::camera::Camera::from_scene(&scene), 256, 192);
-    let shadow = crate::bench::shadow_rays(&scene, &bvh, &cam);
-    // SAFETY: as above.
-    let got = unsafe { masked(&bvh, &shadow) };
-    for (r, o) in shadow.iter().zip(&got) {
-        assert_eq!(*o, bvh.occluded(r), "arch:100k: shadow ray {r:?}");
-    }
-}
-
-/// The exact `cold_lines`: every node and leaf's probability and lines.
-fn exact_cold_lines(b: &WideBvh<8>, hot: usize) -> f64 {
-    let root = b.root_area.max(f64::MIN_POSITIVE);
-    let mut items = Vec::new();
-    let mut stack = vec![(b.root, 1.0f64)];
-    while let Some((c, p)) = stack.pop() {
-        if c & LEAF_BIT != 0 {
-            items.push((p, (b.leaf_of(c).n_groups as usize * std::mem::size_of::<TriGroup>()).div_ceil(64)));
-            continue;
+    for order in [ChildOrder::FarthestFirst, ChildOrder::NearestFirst] {
+        let shapes = shapes();
+        let rays = rays(&shapes);
+        let brute = BruteForce::new(&shapes);
+        let bvh = WideBvh::<8>::build(&shapes);
+        // SAFETY: the CPU has AVX2 (checked above).
+        let got = unsafe { masked(&bvh, &rays, order) };
+        let bad = rays.iter().zip(&got).filter(|(r, o)| brute.occluded(r) != **o).count();
+        assert_eq!(bad, 0, "masked packets: occlusion mismatches against brute force");
+        assert!(got.iter().any(|o| *o) && got.iter().any(|o| !*o), "the rays must be partly occluded for the test to mean anything");
+        let scene = crate::bench::load_bench_scene("arch:100k").unwrap();
+        let bvh = WideBvh::<8>::build(&scene.shapes);
+        let cam = camera_rays(&crate::camera::Camera::from_scene(&scene), 256, 192);
+        let shadow = crate::bench::shadow_rays(&scene, &bvh, &cam);
+        // SAFETY: as above.
+        let got = unsafe { masked(&bvh, &shadow, order) };
+        for (r, o) in shadow.iter().zip(&got) {
+            assert_eq!(*o, bvh.occluded(r), "arch:100k: shadow ray {r:?}");
         }
-        items.push((p, std::mem::size_of::<Node<8>>().div_ceil(64)));
-        let n = &b.nodes[c as usize];
-        for lane in 0..8 {
-            if n.child[lane] != EMPTY {
-                let e = [0, 1, 2].map(|a| (n.bounds[3 + a][lane] - n.bounds[a][lane]).max(0.0) as f64);
-                stack.push((n.child[lane], (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]) / root));
-            }
-        }
-    }
-    if items.len() <= hot {
-        return 0.0;
-    }
-    let mut ps: Vec<f32> = items.iter().map(|i| i.0 as f32).collect();
-    ps.sort_by(|a, b| b.total_cmp(a));
-    let p_hot = ps[hot - 1];
-    items.iter().filter(|i| (i.0 as f32) < p_hot).map(|i| i.0 * i.1 as f64).sum()
-}
-
-/// The interleaving rule's estimate of cache lines fetched from outside
-/// the most likely nodes (random descents) agrees with the exact sum over
-/// every node and leaf within four of its standard errors; and it tells
-/// a dense mesh (interleaved) from the sparse architecture and stadium
-/// scenes (not), as measured.
-#[test]
-fn cold_lines_estimate_matches_the_exact_sum() {
-    for (spec, hot) in [("sphere:100k", 512), ("stadium:100k", 64), ("arch:100k", 256), ("grass:50k", 1024)] {
-        let scene = crate::bench::scenes::generate(spec).unwrap().unwrap();
-        let b = WideBvh::<8>::build(&scene.shapes);
-        let ((est, se), exact) = (b.cold_lines(hot), exact_cold_lines(&b, hot));
-        assert!(exact > 0.0, "{spec}: a test needs cold items");
-        assert!((est - exact).abs() <= 4.0 * se + 1e-9 * exact, "{spec}, hot {hot}: estimate {est} ± {se}, exact {exact}");
-    }
-    let cold = |spec: &str| WideBvh::<8>::build(&crate::bench::scenes::generate(spec).unwrap().unwrap().shapes).cold_lines(HOT_ITEMS).0;
-    assert!(cold("sphere:300k") >= COLD_LINES);
-    for spec in ["arch:300k", "stadium:300k"] {
-        assert!(cold(spec) < COLD_LINES, "{spec}");
     }
 }
