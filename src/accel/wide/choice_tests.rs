@@ -15,17 +15,9 @@ fn exact_cold_lines(b: &WideBvh<8>, hot: usize) -> f64 {
     let mut items = Vec::new();
     let mut stack = vec![(b.root, 1.0f64)];
     while let Some((c, p)) = stack.pop() {
-        if c & LEAF_BIT != 0 {
-            items.push((p, (b.leaf_of(c).n_groups as usize * std::mem::size_of::<TriGroup>()).div_ceil(64)));
-            continue;
-        }
-        items.push((p, std::mem::size_of::<Node<8>>().div_ceil(64)));
-        let n = &b.nodes[c as usize];
-        for lane in 0..8 {
-            if n.child[lane] != EMPTY {
-                let e = [0, 1, 2].map(|a| (n.bounds[3 + a][lane] - n.bounds[a][lane]).max(0.0) as f64);
-                stack.push((n.child[lane], (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]) / root));
-            }
+        items.push((p, b.cache_lines(c)));
+        if c & LEAF_BIT == 0 {
+            stack.extend(b.child_areas(c).map(|(c, area)| (c, area / root)));
         }
     }
     if items.len() <= hot {

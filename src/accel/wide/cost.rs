@@ -41,15 +41,24 @@ impl<const W: usize> WideBvh<W> {
                 continue;
             }
             cost.nodes += area / root; // one visit tests all W child boxes
-            let n = &self.nodes[c as usize];
-            for lane in 0..W {
-                if n.child[lane] != EMPTY {
-                    let e = [0, 1, 2].map(|a| (n.bounds[3 + a][lane] - n.bounds[a][lane]).max(0.0) as f64);
-                    stack.push((n.child[lane], e[0] * e[1] + e[1] * e[2] + e[2] * e[0]));
-                }
-            }
+            stack.extend(self.child_areas(c));
         }
         cost
+    }
+
+    /// The children of node `code`: (child code, half area of its box).
+    pub(super) fn child_areas(&self, code: u32) -> impl Iterator<Item = (u32, f64)> + '_ {
+        let n = &self.nodes[code as usize];
+        (0..W).filter(move |&lane| n.child[lane] != EMPTY).map(move |lane| {
+            let e = [0, 1, 2].map(|a| (n.bounds[3 + a][lane] - n.bounds[a][lane]).max(0.0) as f64);
+            (n.child[lane], e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
+        })
+    }
+
+    /// Cache lines of a node or leaf `code` (a leaf's triangle groups).
+    pub(super) fn cache_lines(&self, code: u32) -> usize {
+        let bytes = if code & LEAF_BIT != 0 { self.leaf_of(code).n_groups as usize * std::mem::size_of::<TriGroup>() } else { std::mem::size_of::<Node<W>>() };
+        bytes.div_ceil(64)
     }
 
     /// Expected cache lines a ray through the root box fetches (SAH
@@ -70,17 +79,7 @@ impl<const W: usize> WideBvh<W> {
         }
         let root = self.root_area.max(f64::MIN_POSITIVE);
         // A node's children: (code, probability).
-        let children = |code: u32| {
-            let n = &self.nodes[code as usize];
-            (0..W).filter(|&lane| n.child[lane] != EMPTY).map(move |lane| {
-                let e = [0, 1, 2].map(|a| (n.bounds[3 + a][lane] - n.bounds[a][lane]).max(0.0) as f64);
-                (n.child[lane], (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]) / root)
-            })
-        };
-        let lines = |code: u32| -> f64 {
-            let bytes = if code & LEAF_BIT != 0 { self.leaf_of(code).n_groups as usize * std::mem::size_of::<TriGroup>() } else { std::mem::size_of::<Node<W>>() };
-            bytes.div_ceil(64) as f64
-        };
+        let children = |code: u32| self.child_areas(code).map(move |(c, area)| (c, area / root));
         // Best first: the probability of the `hot`-th most likely item.
         // Heap entries pack the probability (as f32, whose bits order as
         // the non-negative values do) above the child code.
@@ -106,18 +105,24 @@ impl<const W: usize> WideBvh<W> {
             let (mut code, mut weight, mut p, mut path) = (self.root, 1.0f64, 1.0f64, 0.0);
             loop {
                 if (p as f32 as f64) < p_hot {
-                    path += weight * lines(code);
+                    path += weight * self.cache_lines(code) as f64;
                 }
                 if code & LEAF_BIT != 0 {
                     break;
                 }
-                let sum: f64 = children(code).map(|(_, p)| p).sum();
+                let mut kids = [(EMPTY, 0.0); W];
+                let mut count = 0;
+                for kid in children(code) {
+                    kids[count] = kid;
+                    count += 1;
+                }
+                let sum: f64 = kids[..count].iter().map(|&(_, p)| p).sum();
                 if sum <= 0.0 || p <= 0.0 {
                     break;
                 }
                 let mut pick = rng.uniform() as f64 * sum;
                 let (mut next, mut next_p) = (EMPTY, 0.0);
-                for (c, pc) in children(code) {
+                for &(c, pc) in &kids[..count] {
                     (next, next_p) = (c, pc);
                     if pick < pc {
                         break;

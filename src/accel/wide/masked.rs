@@ -21,7 +21,7 @@
 //! the same triangles, so it is occluded exactly when it is alone.
 
 use super::frustum::PACKET;
-use super::kernels::{sort_far_first, Shear, Slab};
+use super::kernels::{Shear, Slab};
 use super::packet::RaysSoA;
 use super::{WideBvh, EMPTY, LEAF_BIT, STACK};
 use crate::geometry::RayTransform;
@@ -154,11 +154,7 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             // The child `order` visits next on top (see `ChildOrder`).
-            let pushed = std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, u32, f32), sp - base);
-            match order {
-                super::ChildOrder::FarthestFirst => sort_far_first(pushed, |e| -e.2),
-                super::ChildOrder::NearestFirst => sort_far_first(pushed, |e| e.2),
-            }
+            order.sort_pushed(std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, u32, f32), sp - base), |e| e.2);
             // Pop the next node some still-unoccluded ray entered.
             loop {
                 if sp == 0 {

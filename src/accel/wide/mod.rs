@@ -309,10 +309,7 @@ impl<const W: usize> WideBvh<W> {
         }
         // SAFETY: entries base..sp were written just above.
         let pushed = unsafe { std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32), sp - base) };
-        match order {
-            ChildOrder::NearestFirst => sort_far_first(pushed, |e| e.1),
-            ChildOrder::FarthestFirst => sort_far_first(pushed, |e| -e.1),
-        }
+        order.sort_pushed(pushed, |e| e.1);
         sp
     }
 
@@ -435,14 +432,27 @@ pub(super) enum ChildOrder {
     /// was worst (cow 6.7 -> 3.6).
     ///
     /// Hence the choice from a sample (`any_order`). With nearest first
-    /// for every batch, shadow packets (1 thread, Mrays/s) gained on grass:500k 0.30-0.35 -> 0.40-0.42 and stadium:500k 13.1 ->
-    /// 16.5-16.7 but lost on arch:500k (33-34 -> 6.3-6.9), cow (24 -> 14),
+    /// for every batch, shadow packets (1 thread, Mrays/s) gained on
+    /// grass:500k 0.30-0.35 -> 0.40-0.42 and stadium:500k 13.1 -> 16.5-16.7
+    /// but lost on arch:500k (33-34 -> 6.3-6.9), cow (24 -> 14),
     /// subdiv:bunny:500k (3.3 -> 2.0), CBbunny, beetle, maxplanck and
     /// sphere:1M (4-15 %); choosing per batch from a sample, grass 0.42,
     /// stadium 16.1, the rest within 2 % of farthest first (maxplanck's
     /// samples split between the orders: 8.1-8.2 against 8.3). Sampling
     /// every batch instead of every 16th cost 2-5 %.
     FarthestFirst,
+}
+
+impl ChildOrder {
+    /// Sort children just pushed (entry distance `dist`) so that the one
+    /// this order visits next is on top, at the end.
+    #[inline(always)]
+    pub(super) fn sort_pushed<T: Copy>(self, pushed: &mut [T], dist: impl Fn(&T) -> f32) {
+        match self {
+            ChildOrder::NearestFirst => sort_far_first(pushed, dist),
+            ChildOrder::FarthestFirst => sort_far_first(pushed, |e| -dist(e)),
+        }
+    }
 }
 
 /// Pop stacked children until one whose entry distance is within `tmax`
