@@ -3,8 +3,9 @@
 # each scene, a high-spp reference, then every combination of the axes that
 # scene exercises — sampler (independent | sobol) x light sampling (area |
 # solid-angle: rectangles and spheres) x sky sampling (uniform | lune: the
-# hemisphere light at diffuse vertices) x environment sampling (map | product:
-# the map times the receiver's cosine bound) x the specular guide (0 | 0.2: the
+# hemisphere light at diffuse vertices) x environment sampling (map | cosine:
+# the map times the receiver's cosine bound | product: that, and inside the
+# lobe at glossy vertices) x the specular guide (0 | 0.2: the
 # share of diffuse bounces aimed at mirror, glass and metal objects) — at 4,
 # 16, 64, 256 spp over several
 # seeds. Prints relMSE (mean over seeds), the log-log slope of relMSE against
@@ -18,6 +19,9 @@
 # scene keys: m1 (built-in scene, direct light), m5 (built-in, -m 5),
 #             bunny (sky/bunny.dae -m 5: the hemisphere light),
 #             env (sky/bunny_unlit.dae -e studio.exr -m 5),
+#             glossy_env (sky/bunny_microfacet_cu_unlit.dae -e courtyard.exr -m 3:
+#             the copper bunny, where `product` samples inside the glossy lobe
+#             and `cosine` by the cosine bound; not run by default),
 #             spheres (sky/CBspheres.dae -m 5: mirror and glass spheres)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -49,6 +53,7 @@ args_of() {
         m5) echo "-m 5" ;;
         bunny) need "$shared/sky/bunny.dae"; echo "$shared/sky/bunny.dae -m 5" ;;
         env) need "$shared/sky/bunny_unlit.dae"; need "$envmaps/studio.exr"; echo "$shared/sky/bunny_unlit.dae -e $envmaps/studio.exr -m 5" ;;
+        glossy_env) need "$shared/sky/bunny_microfacet_cu_unlit.dae"; need "$envmaps/courtyard.exr"; echo "$shared/sky/bunny_microfacet_cu_unlit.dae -e $envmaps/courtyard.exr -m 3" ;;
         spheres) need "$shared/sky/CBspheres.dae"; echo "$shared/sky/CBspheres.dae -m 5" ;;
         *) echo "measure-sampling: unknown scene key $1" >&2; exit 2 ;;
     esac
@@ -60,6 +65,7 @@ combos_of() {
         m1 | m5) echo "independent,area,uniform,map,0 sobol,area,uniform,map,0.2 independent,solid-angle,uniform,map,0.2 sobol,solid-angle,uniform,map,0.2" ;;
         bunny) echo "independent,area,uniform,map,0 sobol,area,uniform,map,0.2 independent,area,lune,map,0.2 sobol,area,lune,map,0.2" ;;
         env) echo "independent,area,uniform,map,0 sobol,area,uniform,map,0.2 independent,area,uniform,product,0.2 sobol,area,uniform,product,0.2" ;;
+        glossy_env) echo "independent,area,uniform,map,0 sobol,area,uniform,map,0.2 sobol,area,uniform,cosine,0.2 sobol,area,uniform,product,0.2" ;;
         spheres) echo "independent,area,uniform,map,0 sobol,solid-angle,uniform,map,0 sobol,solid-angle,uniform,map,0.2" ;;
     esac
 }

@@ -10,7 +10,7 @@ mod common;
 use glam::{Mat3, Vec3};
 use pathtracer::accel::BackendKind;
 use pathtracer::camera::Camera;
-use pathtracer::light::{Light, Lights};
+use pathtracer::light::{EnvAt, Light, Lights};
 use pathtracer::render::{self, path::PathTracer, RenderSettings};
 use pathtracer::rng::Rng;
 use pathtracer::sampling::{cosine_hemisphere, cosine_hemisphere_pdf, uniform_hemisphere, UNIFORM_HEMISPHERE_PDF};
@@ -73,7 +73,7 @@ fn sampling_routines_pass_chi_square_and_their_pdfs_integrate_to_one() {
     let mut rng = Rng::new(99, 3);
     for _ in 0..n {
         let u = rng.uniform2();
-        let s = quad.sample(&scene, shading_point, u, rng.uniform(), None).expect("the quad faces the point");
+        let s = quad.sample(&scene, shading_point, u, rng.uniform(), EnvAt::Map).expect("the quad faces the point");
         let t = (lo.y - shading_point.y) / s.wi.y;
         let q = shading_point + s.wi * t;
         let ix = (((q.x - lo.x) / (hi.x - lo.x) * gx as f32) as usize).min(gx - 1);
@@ -149,7 +149,7 @@ fn area_light_pdf_is_a_density_over_solid_angle() {
         let (mut s1, mut s2) = (0.0f64, 0.0f64);
         for _ in 0..n {
             let u = rng.uniform2();
-            let s = quad.sample(&scene, p, u, rng.uniform(), None).unwrap();
+            let s = quad.sample(&scene, p, u, rng.uniform(), EnvAt::Map).unwrap();
             // MIS needs the pdf a BSDF ray hitting that point is given to
             // equal the one the sample was drawn with.
             let pathtracer::light::Target::Point(q) = s.target else { panic!("not a point") };
@@ -208,7 +208,7 @@ fn mesh_lights_sample_triangles_by_solid_angle_with_a_consistent_pdf() {
         let (mut s1, mut s2) = (0.0f64, 0.0f64);
         for _ in 0..n {
             let (u, us) = (rng.uniform2(), rng.uniform());
-            let s = light.sample(&scene, p, u, us, None).unwrap_or_else(|| panic!("from {p}: no sample for {u:?} {us}"));
+            let s = light.sample(&scene, p, u, us, EnvAt::Map).unwrap_or_else(|| panic!("from {p}: no sample for {u:?} {us}"));
             let pathtracer::light::Target::Point(q) = s.target else { panic!("not a point") };
             let ph = light.pdf_hit(&scene, p, q, Vec3::NEG_Y, s.prim);
             assert!((ph - s.pdf).abs() <= 1e-4 * s.pdf, "from {p}: pdf_hit {ph} vs sample pdf {}", s.pdf);
@@ -244,7 +244,7 @@ fn sphere_lights_sampled_by_their_cone_give_the_closed_form_irradiance() {
         let n = 200_000;
         let (mut s1, mut s2) = (0.0f64, 0.0f64);
         for _ in 0..n {
-            let s = light.sample(&scene, p, rng.uniform2(), rng.uniform(), None).expect("the sphere is in view");
+            let s = light.sample(&scene, p, rng.uniform2(), rng.uniform(), EnvAt::Map).expect("the sphere is in view");
             let pathtracer::light::Target::Point(q) = s.target else { panic!("not a point") };
             let ph = light.pdf_hit(&scene, p, q, (q - center).normalize(), s.prim);
             assert!((ph - s.pdf).abs() <= 1e-3 * s.pdf, "d {d}: pdf_hit {ph} vs {}", s.pdf);

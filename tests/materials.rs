@@ -37,7 +37,7 @@ fn render_env(scene: &Scene, cam: &Camera, env: Arc<EnvMap>, backend: BackendKin
 #[allow(clippy::too_many_arguments)]
 fn render_env_sampled(scene: &Scene, cam: &Camera, env: Arc<EnvMap>, backend: BackendKind, m: u32, hemisphere: bool, rr: bool, spp: u32, seed: u64, product: bool) -> RenderOutput {
     let accel = common::build(backend, &scene.shapes);
-    let lights = Lights::with_environment(scene, Some(env)).unwrap().with_env_product(product);
+    let lights = Lights::with_environment(scene, Some(env)).unwrap().with_env_sampling(product, product);
     let integ = PathTracer { scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate: true, hemisphere, light_samples: 1, russian_roulette: rr };
     render::render(cam, &integ, &RenderSettings::new(cam.screen_w, cam.screen_h, spp, seed))
 }

@@ -154,8 +154,10 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value_t = SkySamplingArg::Lune)]
     pub sky_sampling: SkySamplingArg,
     /// How the environment map (-e) is sampled at reflecting vertices: by
-    /// the map times a bound of the receiver's cosine (`light::env_product`),
-    /// or by the map alone (Cycles' and Mitsuba's way, for A/B comparisons)
+    /// the map times a bound of the receiver's cosine (`light::env_product`)
+    /// and, at glossy vertices of α ≤ 0.1, inside the lobe's cone
+    /// (`light::env_lobe`); or for A/B comparisons by the cosine bound
+    /// everywhere, or by the map alone (Cycles' and Mitsuba's way)
     #[arg(long, value_enum, default_value_t = EnvSamplingArg::Product)]
     pub env_sampling: EnvSamplingArg,
     /// Share of a diffuse surface's bounce rays aimed at the scene's mirror,
@@ -221,8 +223,10 @@ pub enum SkySamplingArg {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum EnvSamplingArg {
-    /// The map times a conservative bound of the receiver's cosine, per bin of normals
+    /// The map times a conservative bound of the receiver's cosine, per bin of normals; at glossy vertices (microfacet, α ≤ 0.1) the map inside the lobe's cone
     Product,
+    /// The cosine bound at every reflecting vertex, glossy ones included
+    Cosine,
     /// The map's luminance alone
     Map,
 }

@@ -192,7 +192,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let lights = match a.integrator {
         IntegratorKind::Path => {
             check_materials(&scene)?;
-            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_product(a.env_sampling == EnvSamplingArg::Product).with_specular_guide(&scene, a.specular_guide).with_light_pick(&scene, a.light_pick == LightPickArg::One);
+            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_sampling(a.env_sampling != EnvSamplingArg::Map, a.env_sampling == EnvSamplingArg::Product).with_specular_guide(&scene, a.specular_guide).with_light_pick(&scene, a.light_pick == LightPickArg::One);
             if l.lights.is_empty() {
                 // One line: the notes (a zero-radiance light dropped) go into it.
                 let why = if l.notes.is_empty() { String::new() } else { format!(" ({})", l.notes.join("; ")) };

@@ -32,6 +32,7 @@
 //! texel's integral had 1.8x the variance of Cycles 3.4 per sample; see the
 //! README.
 
+use super::env_lobe::EnvLobe;
 use super::env_product::EnvProduct;
 use crate::error::Result;
 use crate::render::illuminance;
@@ -63,6 +64,8 @@ pub struct EnvMap {
     lum: Vec<f64>,
     /// The map × cosine-bound tables (`env_product`).
     pub product: Option<EnvProduct>,
+    /// The glossy-lobe tables over the product's tiles (`env_lobe`).
+    pub lobe: Option<EnvLobe>,
 }
 
 impl EnvMap {
@@ -92,7 +95,7 @@ impl EnvMap {
     pub fn from_texels(path: String, width: usize, height: usize, texels: Vec<Vec3>) -> EnvMap {
         let (w, h) = (width, height);
         let lum: Vec<f64> = texels.iter().map(|&t| illuminance(t.max(Vec3::ZERO)) as f64).collect();
-        let mut map = EnvMap { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)], lum, product: None };
+        let mut map = EnvMap { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)], lum, product: None, lobe: None };
         let mut weight = vec![0.0f64; w * (h + 1)];
         for q in 0..=h {
             let (y0, y1) = map.patch_rows(q);
@@ -115,7 +118,9 @@ impl EnvMap {
                 }
             }
             map.row_cdf[h + 1] = 1.0;
-            map.product = Some(EnvProduct::build(&map));
+            let product = EnvProduct::build(&map);
+            map.lobe = Some(EnvLobe::build(&product));
+            map.product = Some(product);
         }
         map
     }
@@ -192,7 +197,7 @@ impl EnvMap {
     }
 
     /// Direction of texel coordinates (x, y).
-    fn direction(&self, x: f64, y: f64) -> (Vec3, f64) {
+    pub(super) fn direction(&self, x: f64, y: f64) -> (Vec3, f64) {
         let phi = x / self.width as f64 * 2.0 * PI;
         let theta = y / self.height as f64 * PI;
         let (st, ct) = theta.sin_cos();

@@ -13,7 +13,10 @@
 //!   direction with y > 0, seen by rays that escape), and proxy-less
 //!   rectangular area lights (not geometry, so only light sampling sees them).
 //! * The environment light (`-e FILE.exr`, see `environment`): radiance from
-//!   every direction, seen by escaping rays, importance sampled.
+//!   every direction, seen by escaping rays, importance sampled: by the map
+//!   × a bound of the receiver's cosine (`env_product`), inside the lobe at
+//!   glossy vertices (`env_lobe`), by the map alone where light passes
+//!   through (`EnvAt`).
 //! * Lights of zero radiance (the `_unlit` scenes' sky) are dropped.
 //! * Sampling (CS184 samples every emitter by area): rectangles — area
 //!   lights and two-triangle rectangular meshes — by solid angle
@@ -23,6 +26,7 @@
 //!   solid angle where that pays (`spherical_triangle`), else by area.
 //!   `pdf_hit` applies the same choice.
 
+pub mod env_lobe;
 pub mod env_product;
 pub mod environment;
 pub mod lune;
@@ -43,6 +47,17 @@ use crate::scene::{Interaction, LightKind, Scene, Shape};
 use glam::{Vec3, Vec4Swizzles};
 use std::sync::Arc;
 use std::f32::consts::PI;
+
+/// How the environment light is sampled at a vertex (the BSDF sample's
+/// MIS weight uses the same): by the map alone, by the map × a bound of
+/// the cosine of a receiver with this shading normal (`env_product`), or
+/// inside a glossy lobe's cone (`env_lobe`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum EnvAt {
+    Map,
+    Cosine(Vec3),
+    Lobe(env_lobe::Lobe),
+}
 
 #[derive(Clone, Debug)]
 pub enum Light {
@@ -182,12 +197,14 @@ impl Light {
 
     /// Solid-angle pdf of `sample` for an escaping direction (hemisphere
     /// light, environment map), with the same `env_normal` as `sample`.
-    pub fn pdf_escape(&self, dir: Vec3, env_normal: Option<Vec3>) -> f32 {
+    pub fn pdf_escape(&self, dir: Vec3, env_at: EnvAt) -> f32 {
         match self {
             Light::Hemisphere { .. } if dir.y > 0.0 => UNIFORM_HEMISPHERE_PDF,
-            Light::Environment(e) => match env_normal {
-                Some(n) => e.product.as_ref().map_or(0.0, |pr| pr.pdf(e, n, dir)),
-                None => e.pdf(dir),
+            Light::Environment(e) => match (env_at, &e.product, &e.lobe) {
+                (EnvAt::Lobe(l), Some(pr), Some(lobes)) => lobes.pdf(pr, e, &l, dir),
+                (EnvAt::Cosine(n), Some(pr), _) => pr.pdf(e, n, dir),
+                (EnvAt::Map, _, _) => e.pdf(dir),
+                _ => 0.0,
             },
             _ => 0.0,
         }
@@ -204,7 +221,7 @@ impl Light {
     /// (`env_product`) where one is given, else by the map alone. `None`
     /// when the sample carries no light (the back of a one-sided emitter, a
     /// degenerate configuration).
-    pub fn sample(&self, scene: &Scene, p: Vec3, u: (f32, f32), u_sel: f32, env_normal: Option<Vec3>) -> Option<LightSample> {
+    pub fn sample(&self, scene: &Scene, p: Vec3, u: (f32, f32), u_sel: f32, env_at: EnvAt) -> Option<LightSample> {
         match self {
             Light::Point { position, intensity } => {
                 let d = *position - p;
@@ -270,9 +287,10 @@ impl Light {
                 area_sample(p, q, n, mag, *radiance, 1.0 / (4.0 * PI * radius * radius))
             }
             Light::Environment(e) => {
-                let (wi, value, pdf) = match env_normal {
-                    Some(n) => e.product.as_ref()?.sample(e, n, u)?,
-                    None => e.sample(u)?,
+                let (wi, value, pdf) = match env_at {
+                    EnvAt::Lobe(l) => e.lobe.as_ref()?.sample(e.product.as_ref()?, e, &l, u)?,
+                    EnvAt::Cosine(n) => e.product.as_ref()?.sample(e, n, u)?,
+                    EnvAt::Map => e.sample(u)?,
                 };
                 Some(LightSample { wi, value, pdf, target: Target::Infinite, covers: false, prim: 0 })
             }
@@ -335,6 +353,9 @@ pub struct Lights {
     /// Sample the environment map × the receiver's cosine bound at
     /// vertices that do not transmit (`env_product`); else the map alone.
     pub env_product: bool,
+    /// At glossy vertices, sample the environment inside the lobe's cone
+    /// (`env_lobe`) instead (with `env_product` on).
+    pub env_lobes: bool,
     /// Continuation rays of diffuse vertices partly aimed at the scene's
     /// specular and glossy objects (`specular_guide`); `None`: cosine only.
     pub guide: Option<specular_guide::SpecularGuide>,
@@ -350,7 +371,7 @@ impl Lights {
 
     /// The scene's lights plus an environment map (`-e`).
     pub fn with_environment(scene: &Scene, env: Option<Arc<EnvMap>>) -> Result<Lights> {
-        let mut out = Lights { of_geometry: vec![None; scene.shapes.len()], env_product: true, ..Lights::default() };
+        let mut out = Lights { of_geometry: vec![None; scene.shapes.len()], env_product: true, env_lobes: true, ..Lights::default() };
         // Emissive shapes first.
         for (g, shape) in scene.shapes.iter().enumerate() {
             let radiance = scene.material_of(g as u32).emission;
@@ -454,10 +475,12 @@ impl Lights {
         self
     }
 
-    /// `with_sampling`'s switch for the environment map (`--env-sampling`):
-    /// `product` = the map × cosine bound (`env_product`), else the map alone.
-    pub fn with_env_product(mut self, product: bool) -> Lights {
+    /// `with_sampling`'s switches for the environment map (`--env-sampling`):
+    /// `product` = the map × cosine bound (`env_product`), else the map
+    /// alone; `lobes` = inside the lobe at glossy vertices (`env_lobe`).
+    pub fn with_env_sampling(mut self, product: bool, lobes: bool) -> Lights {
         self.env_product = product;
+        self.env_lobes = lobes;
         self
     }
 
@@ -479,6 +502,14 @@ impl Lights {
     }
 
     /// Radiance of the lights a ray escaping along `dir` sees.
+    /// The environment map, if the scene has one.
+    pub fn environment(&self) -> Option<&EnvMap> {
+        self.lights.iter().find_map(|l| match l {
+            Light::Environment(e) => Some(&**e),
+            _ => None,
+        })
+    }
+
     pub fn escaped(&self, dir: Vec3) -> Vec3 {
         self.lights.iter().map(|l| l.escaped(dir)).sum()
     }

@@ -27,7 +27,7 @@ use super::Integrator;
 use crate::accel::{Hit, Traversal};
 use crate::bsdf::Bsdf;
 use crate::light::specular_guide::GuideAt;
-use crate::light::{emitted, Lights};
+use crate::light::{emitted, EnvAt, Lights};
 use crate::ray::Ray;
 use crate::sampler::Sampler;
 use crate::sampling::Frame;
@@ -60,6 +60,9 @@ pub(super) struct Vertex {
     pub wo: Vec3,
     /// What the surface does with light; `None` where it does not scatter.
     pub bsdf: Option<Bsdf>,
+    /// How the environment light is sampled here (`PathTracer::env_at`),
+    /// by the light samples and in the BSDF sample's MIS weight alike.
+    pub env_at: EnvAt,
 }
 
 impl PathTracer<'_> {
@@ -79,7 +82,11 @@ impl PathTracer<'_> {
         }
         let frame = Frame::new(ns);
         let bsdf = Bsdf::of(&self.scene.material_of(it.geom_id).bsdf, front);
-        Vertex { it, ng, ns, frame, wo: frame.to_local(wo), bsdf }
+        let mut v = Vertex { it, ng, ns, frame, wo: frame.to_local(wo), bsdf, env_at: EnvAt::Map };
+        if let Some(b) = &v.bsdf {
+            v.env_at = self.env_at(b, &v);
+        }
+        v
     }
 
     /// MIS weight of the BSDF sample `c` that reached the emitter surface
@@ -122,11 +129,22 @@ impl PathTracer<'_> {
         !self.hemisphere && matches!(bsdf, Bsdf::Diffuse(_))
     }
 
-    /// The normal the environment light is sampled for at `v` (the shading
-    /// normal), where it is sampled by the map × cosine bound: with
-    /// `env_product` on, and a BSDF that does not transmit.
-    pub(super) fn env_normal(&self, bsdf: &Bsdf, v: &Vertex) -> Option<Vec3> {
-        (self.lights.env_product && !self.hemisphere && !bsdf.transmits()).then_some(v.ns)
+    /// How the environment light is sampled at `v`: with `env_product` on
+    /// and a BSDF that does not transmit, inside the lobe where the BSDF is
+    /// glossy enough (`env_lobe`), else by the map × the bound of the
+    /// shading normal's cosine; otherwise by the map alone.
+    fn env_at(&self, bsdf: &Bsdf, v: &Vertex) -> EnvAt {
+        let Some(env) = self.lights.environment() else { return EnvAt::Map };
+        if !self.lights.env_product || self.hemisphere || bsdf.transmits() {
+            return EnvAt::Map;
+        }
+        if let (Bsdf::Microfacet(m), Some(lobes), true) = (bsdf, &env.lobe, self.lights.env_lobes) {
+            let mirror = v.frame.to_world(Vec3::new(-v.wo.x, -v.wo.y, v.wo.z));
+            if let Some(l) = lobes.lobe(mirror, m.alpha) {
+                return EnvAt::Lobe(l);
+            }
+        }
+        EnvAt::Cosine(v.ns)
     }
 
     /// What a BSDF sample that escaped along `c.wi` sees: each escaping
@@ -143,7 +161,7 @@ impl PathTracer<'_> {
                 } else if le == Vec3::ZERO || c.delta {
                     le
                 } else {
-                    le * power_heuristic(c.pdf, self.light_samples as f32 * l.pdf_escape(c.wi, c.env_normal))
+                    le * power_heuristic(c.pdf, self.light_samples as f32 * l.pdf_escape(c.wi, c.env_at))
                 }
             })
             .sum()
@@ -247,7 +265,7 @@ pub(super) struct Continuation {
     /// The vertex's shading normal where it sampled the environment by
     /// the map × cosine bound (`PathTracer::env_normal`): this ray's
     /// escape is weighted against that pdf.
-    pub env_normal: Option<Vec3>,
+    pub env_at: EnvAt,
 }
 
 /// Veach's power heuristic (beta = 2) for a sample of pdf `a` against `b`,
@@ -262,3 +280,4 @@ pub(super) fn power_heuristic(a: f32, b: f32) -> f32 {
         0.0
     }
 }
+

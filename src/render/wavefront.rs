@@ -14,7 +14,7 @@
 use super::path::{Continuation, PathTracer, Vertex};
 use crate::accel::Hit;
 use crate::light::specular_guide::GuideAt;
-use crate::light::{emitted, lune, pick, Light, LightSample, Target};
+use crate::light::{emitted, lune, pick, EnvAt, Light, LightSample, Target};
 use crate::ray::Ray;
 use crate::bsdf::{Bsdf, BsdfSample};
 use crate::sampler::{dim, Sampler};
@@ -54,7 +54,7 @@ struct LightsAt<'v, 'g> {
     v: &'v Vertex,
     bsdf: Bsdf,
     alone: bool,
-    env_normal: Option<Vec3>,
+    env_at: EnvAt,
     /// The path's last vertex.
     last: bool,
     /// The guide's cones here: the continuation's pdf is their mixture.
@@ -209,7 +209,7 @@ impl<'a> PathTracer<'a> {
             v,
             bsdf,
             alone: self.alone(&bsdf),
-            env_normal: self.env_normal(&bsdf, v),
+            env_at: v.env_at,
             last: bounce == self.max_depth,
             guide,
         };
@@ -281,7 +281,7 @@ impl<'a> PathTracer<'a> {
             Light::Hemisphere { radiance, .. } if lune => {
                 lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true, prim: 0 })
             }
-            _ => light.sample(self.scene, v.it.p, u, u_sel, at.env_normal),
+            _ => light.sample(self.scene, v.it.p, u, u_sel, at.env_at),
         };
         let by_itself = at.alone && s.is_some_and(|s| s.covers);
         let Some(s) = s else { return by_itself };
@@ -389,7 +389,7 @@ impl<'a> PathTracer<'a> {
             }
             beta_next /= q;
         }
-        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale, alone: self.alone(&bsdf), env_normal: self.env_normal(&bsdf, v) })
+        Some(Continuation { wi, pdf: s.pdf, beta: beta_next, delta: s.delta, radiance_scale, alone: self.alone(&bsdf), env_at: v.env_at })
     }
 
     /// The guide's cones from diffuse vertex `v` at `bounce`
@@ -441,3 +441,4 @@ fn guided_pdf(at: &GuideAt, local: Vec3, world: Vec3, from: Option<usize>) -> f3
     let q = at.fraction();
     (1.0 - q) * cosine_hemisphere_pdf(local.z) + q * at.pdf(world, from)
 }
+
