@@ -199,8 +199,10 @@ pub struct RenderArgs {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum SamplerArg {
-    /// Owen-scrambled, shuffled Sobol points, one sequence per draw (Burley 2020)
+    /// Owen-scrambled, shuffled Sobol points (Burley 2020), the first light sample and the position in the pixel one 4D point
     Sobol,
+    /// Owen-scrambled Sobol, one 2D sequence per draw (Cycles 3.4's way; for A/B comparisons)
+    SobolPadded,
     /// Independent uniform random numbers (CS184's kind; for A/B comparisons)
     Independent,
 }

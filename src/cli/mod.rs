@@ -127,7 +127,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             // Owen-scrambled Sobol points are stratified in aligned blocks of
             // 2^m samples: a pixel that stops (or, with the pilot rule, is
             // given) a multiple of a power-of-two batch keeps whole blocks.
-            let batch = if a.sampler == SamplerArg::Sobol && !batch.is_power_of_two() {
+            let batch = if a.sampler != SamplerArg::Independent && !batch.is_power_of_two() {
                 let b = batch.checked_next_power_of_two().unwrap_or(1 << 31);
                 batch_note = Some(format!("-a {batch}: Sobol samples are stratified in blocks of powers of two; checking every {b} samples"));
                 b
@@ -231,6 +231,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     settings.progress = render::progress_wanted();
     settings.sampler = match a.sampler {
         SamplerArg::Sobol => crate::sampler::SamplerKind::Sobol,
+        SamplerArg::SobolPadded => crate::sampler::SamplerKind::SobolPadded,
         SamplerArg::Independent => crate::sampler::SamplerKind::Independent,
     };
     if let Some(p) = &part {

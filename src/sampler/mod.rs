@@ -2,10 +2,22 @@
 //!
 //! One interface, two samplers: `Independent` (uniform random numbers from
 //! a counter-based hash, the A/B baseline; CS184 draws independent numbers
-//! too) and `Sobol` (Owen-scrambled, shuffled Sobol, `sobol.rs`). Draws are
+//! too) and Owen-scrambled, shuffled Sobol (`sobol.rs`), in two variants:
+//! `SobolPadded`, every 2D draw its own sequence, and `Sobol` (the
+//! default), which takes the first vertex's first light sample and the
+//! position in the pixel from one 4D point, so the pair is stratified
+//! jointly (Burley 2020's 4D sets; Cycles 3.4 pads them apart). Draws are
 //! addressed, not streamed: a draw is (pixel, sample index, dimension id),
 //! so the integrator gives every use a fixed id (`dim`) and a draw that one
 //! path skips never shifts the numbers another draw sees.
+//!
+//! The 4D pairing, measured (CBspheres_lambertian `-m 1`, 160×120, 8 seeds,
+//! 1 thread, against 8192 spp): relMSE padded / paired 3.74e-5 / 3.53e-5 at
+//! 16 spp, 5.04e-6 / 3.89e-6 at 64, 8.64e-7 / 5.14e-7 at 256 (1.06×, 1.30×,
+//! 1.68×), same time; the copper Cornell bunny `-m 5` (glossy, indirect
+//! light) within 0.3 %. The light draw's own 2D projection is Sobol
+//! dimensions 2 and 3, a (1,m,2)-net in aligned blocks of 2^m ≥ 16
+//! (dimensions 0 and 1: (0,m,2)).
 //!
 //! The integrator draws through `camera`, `lens` and, at path vertex
 //! `bounce` (set with `set_bounce`), `slot_1d`/`slot_2d`.
@@ -18,7 +30,10 @@ use crate::rng::mix64;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SamplerKind {
     Independent,
+    /// Owen-scrambled Sobol, the first light sample paired with the pixel.
     Sobol,
+    /// Owen-scrambled Sobol, every draw its own sequence.
+    SobolPadded,
 }
 
 /// Fixed dimension ids: the camera's, then 16 per bounce.
@@ -103,6 +118,11 @@ impl Sampler {
 
     #[inline]
     pub fn slot_2d(&self, slot: u32, k: u64) -> (f32, f32) {
+        if self.bounce == 1 && slot == dim::LIGHT && k == 0 && self.kind == SamplerKind::Sobol {
+            // The camera's 4D point: its first two coordinates are `camera`.
+            let p = sobol::sample_4d(self.pixel_seed, dim::CAMERA, self.rev_index, self.index_bits);
+            return (p[2], p[3]);
+        }
         self.get_2d(dim::at_bounce(self.bounce, slot, k))
     }
 
@@ -115,7 +135,7 @@ impl Sampler {
     pub fn get_1d(&self, dim: u64) -> f32 {
         match self.kind {
             SamplerKind::Independent => sobol::to_unit(self.hashed(dim) as u32),
-            SamplerKind::Sobol => sobol::sample_1d(self.pixel_seed, dim, self.rev_index, self.index_bits),
+            SamplerKind::Sobol | SamplerKind::SobolPadded => sobol::sample_1d(self.pixel_seed, dim, self.rev_index, self.index_bits),
         }
     }
 
@@ -126,7 +146,7 @@ impl Sampler {
                 let h = self.hashed(dim);
                 (sobol::to_unit(h as u32), sobol::to_unit((h >> 32) as u32))
             }
-            SamplerKind::Sobol => sobol::sample_2d(self.pixel_seed, dim, self.rev_index, self.index_bits),
+            SamplerKind::Sobol | SamplerKind::SobolPadded => sobol::sample_2d(self.pixel_seed, dim, self.rev_index, self.index_bits),
         }
     }
 }
@@ -229,6 +249,29 @@ mod tests {
             let e = n as f64 / 16.0;
             let chi2: f64 = bins.iter().map(|&b| (b as f64 - e).powi(2) / e).sum();
             assert!(chi2 < 42.3, "{kind:?}: χ² {chi2:.1}");
+        }
+    }
+
+    /// `Sobol` draws the first vertex's first light sample from the camera's
+    /// 4D point (the pixel position its first two coordinates); every other
+    /// light draw, and every draw of `SobolPadded`, is its own sequence.
+    #[test]
+    fn the_first_light_sample_is_paired_with_the_pixel() {
+        for index in 0..64 {
+            let mut paired = Sampler::for_pixel(SamplerKind::Sobol, 9, 3, 4, 64);
+            let mut padded = Sampler::for_pixel(SamplerKind::SobolPadded, 9, 3, 4, 64);
+            paired.start(index);
+            padded.start(index);
+            let p = sobol::sample_4d(paired.pixel_seed, dim::CAMERA, paired.rev_index, paired.index_bits);
+            assert_eq!(paired.camera(), (p[0], p[1]));
+            assert_eq!(padded.camera(), (p[0], p[1]));
+            assert_eq!(paired.slot_2d(dim::LIGHT, 0), (p[2], p[3]));
+            assert_ne!(padded.slot_2d(dim::LIGHT, 0), (p[2], p[3]));
+            assert_eq!(paired.slot_2d(dim::LIGHT, 1), padded.slot_2d(dim::LIGHT, 1));
+            assert_eq!(paired.slot_2d(dim::BSDF, 0), padded.slot_2d(dim::BSDF, 0));
+            paired.set_bounce(2);
+            padded.set_bounce(2);
+            assert_eq!(paired.slot_2d(dim::LIGHT, 0), padded.slot_2d(dim::LIGHT, 0));
         }
     }
 }

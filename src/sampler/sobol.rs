@@ -77,6 +77,72 @@ static Y_REVERSED: [[u32; 256]; 4] = {
     t
 };
 
+/// Direction words of Sobol dimensions 2 and 3 (Joe and Kuo's primitive
+/// polynomials x² + x + 1, m = {1, 3}, and x³ + x + 1, m = {1, 3, 1}):
+/// V[k] = m_k·2^(31−k) for the first s words, then Bratley and Fox's
+/// recurrence.
+const DIRECTIONS_2: [u32; 32] = directions(2, 0b1, [1, 3, 0]);
+const DIRECTIONS_3: [u32; 32] = directions(3, 0b01, [1, 3, 1]);
+
+const fn directions(s: usize, a: u32, m: [u32; 3]) -> [u32; 32] {
+    let mut v = [0u32; 32];
+    let mut k = 0;
+    while k < 32 {
+        if k < s {
+            v[k] = m[k] << (31 - k);
+        } else {
+            let mut x = v[k - s] ^ (v[k - s] >> s);
+            let mut i = 1;
+            while i < s {
+                // a's bit for V[k−i], most significant first.
+                if (a >> (s - 1 - i)) & 1 != 0 {
+                    x ^= v[k - i];
+                }
+                i += 1;
+            }
+            v[k] = x;
+        }
+        k += 1;
+    }
+    v
+}
+
+/// `Y_REVERSED`'s tables for dimensions 2 and 3.
+static REVERSED_2: [[u32; 256]; 4] = reversed_tables(&DIRECTIONS_2);
+static REVERSED_3: [[u32; 256]; 4] = reversed_tables(&DIRECTIONS_3);
+
+const fn reversed_tables(dirs: &[u32; 32]) -> [[u32; 256]; 4] {
+    let mut t = [[0u32; 256]; 4];
+    let mut b = 0;
+    while b < 4 {
+        let mut v = 0;
+        while v < 256 {
+            let mut x = 0u32;
+            let mut k = 0;
+            while k < 8 {
+                if v & (1 << k) != 0 {
+                    x ^= dirs[8 * b + k].reverse_bits();
+                }
+                k += 1;
+            }
+            t[b][v] = x;
+            v += 1;
+        }
+        b += 1;
+    }
+    t
+}
+
+/// A dimension of index `i`, bit-reversed, from its tables.
+#[inline]
+fn reversed_from(t: &[[u32; 256]; 4], i: u32) -> u32 {
+    let lo = t[0][(i & 0xff) as usize];
+    if i < 256 {
+        return lo;
+    }
+    lo ^ t[1][((i >> 8) & 0xff) as usize] ^ t[2][((i >> 16) & 0xff) as usize] ^ t[3][(i >> 24) as usize]
+}
+
 /// The scrambling hash on bit-reversed values: output bit k depends only
 /// on input bits 0..=k (low to high), so reversing before and after makes
 /// it a nested scramble from the top bit down (`owen`).
@@ -145,6 +211,23 @@ pub fn sample_2d(pixel_seed: u64, dim: u64, rev_index: u32, bits: u32) -> (f32, 
     let x = scramble_reversed(j, s[1]).reverse_bits();
     let y = scramble_reversed(sobol_y_reversed(j), s[2]).reverse_bits();
     (to_unit(x), to_unit(y))
+}
+
+/// Draw `index` of the 4D sequence of dimension `dim`: Sobol dimensions
+/// 0-3 at one shuffled index, each Owen-scrambled on its own seed. Its
+/// first two coordinates are `sample_2d`'s draw for the same `dim`, so a
+/// 2D draw can be extended to a 4D point without changing it.
+#[inline]
+pub fn sample_4d(pixel_seed: u64, dim: u64, rev_index: u32, bits: u32) -> [f32; 4] {
+    let s = seeds_of(pixel_seed, dim);
+    let j = shuffled(rev_index, bits, s[0]);
+    let x = scramble_reversed(j, s[1]).reverse_bits();
+    let y = scramble_reversed(sobol_y_reversed(j), s[2]).reverse_bits();
+    // Two more seeds from a second hash of the same (pixel, dimension).
+    let h = crate::rng::mix64(pixel_seed ^ dim.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x4D44_5F34_445F_5345);
+    let z = scramble_reversed(reversed_from(&REVERSED_2, j), h as u32).reverse_bits();
+    let w = scramble_reversed(reversed_from(&REVERSED_3, j), (h >> 32) as u32).reverse_bits();
+    [to_unit(x), to_unit(y), to_unit(z), to_unit(w)]
 }
 
 /// Draw `index` of the 1D sequence of dimension `dim` of a pixel (Sobol
@@ -245,6 +328,78 @@ mod tests {
                         for &x in block {
                             assert!(!std::mem::replace(&mut seen[(x * (1u32 << m) as f32) as usize], true), "1D pixel {pixel} dim {dim} m {m}");
                         }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Dimensions 2 and 3's direction words from Joe and Kuo's m-values by
+    /// the integer recurrence m_k = 2a_1·m_(k−1) ⊕ … ⊕ 2^s·m_(k−s) ⊕ m_(k−s)
+    /// (their formulation, not the shifted-word one the tables use).
+    #[test]
+    fn dimensions_2_and_3_are_joe_and_kuos() {
+        for (s, a, init, words) in [(2usize, 1u64, vec![1u64, 3], &DIRECTIONS_2), (3, 1, vec![1, 3, 1], &DIRECTIONS_3)] {
+            let mut m = init.clone();
+            for k in s..32 {
+                let mut x = (m[k - s] << s) ^ m[k - s];
+                for i in 1..s {
+                    if (a >> (s - 1 - i)) & 1 != 0 {
+                        x ^= m[k - i] << i;
+                    }
+                }
+                m.push(x);
+            }
+            for k in 0..32 {
+                assert_eq!(words[k] as u64, m[k] << (31 - k), "s {s} word {k}");
+            }
+        }
+        // Dimension 2 in index order.
+        let z: Vec<f64> = (0..8u32).map(|i| (0..32).filter(|k| i >> k & 1 != 0).fold(0u32, |acc, k| acc ^ DIRECTIONS_2[k]) as f64 / 4294967296.0).collect();
+        assert_eq!(z, [0.0, 0.5, 0.75, 0.25, 0.375, 0.875, 0.625, 0.125]);
+    }
+
+    /// Whether `pts` (2^m of them, `d` coordinates each) is a (t,m,d)-net:
+    /// every elementary box of volume 2^(t−m) holds exactly 2^t points.
+    fn is_net_nd(pts: &[[f32; 4]], dims: &[usize], m: u32, t: u32) -> bool {
+        fn splits(total: u32, parts: usize) -> Vec<Vec<u32>> {
+            if parts == 1 {
+                return vec![vec![total]];
+            }
+            (0..=total).flat_map(|k| splits(total - k, parts - 1).into_iter().map(move |mut v| {
+                v.insert(0, k);
+                v
+            })).collect()
+        }
+        splits(m - t, dims.len()).iter().all(|e| {
+            let mut count = std::collections::HashMap::new();
+            for p in pts {
+                let cell: Vec<u32> = dims.iter().zip(e).map(|(&d, &k)| (p[d] * (1u64 << k) as f32) as u32).collect();
+                *count.entry(cell).or_insert(0u32) += 1;
+            }
+            count.len() == 1 << (m - t) && count.values().all(|&c| c == 1 << t)
+        })
+    }
+
+    /// The 4D draw: its first two coordinates are the 2D draw of the same
+    /// dimension; every aligned block of 2^m is a (3,m,4)-net (Sobol's t
+    /// for its first four dimensions), its last two coordinates a
+    /// (1,m,2)-net (m = 3: (2,3,2)) and its first two a (0,m,2)-net.
+    #[test]
+    fn four_d_blocks_are_nets() {
+        for pixel in 0..16u64 {
+            let seed = crate::rng::mix64(pixel ^ 0xabc);
+            for dim in [0u64, 33] {
+                let pts: Vec<[f32; 4]> = (0..256).map(|i| sample_4d(seed, dim, reversed_index(i, 8), 8)).collect();
+                for (i, p) in pts.iter().enumerate() {
+                    assert_eq!((p[0], p[1]), sample_2d(seed, dim, reversed_index(i as u32, 8), 8));
+                }
+                for m in 3..=8u32 {
+                    for block in pts.chunks(1 << m).take(2) {
+                        assert!(is_net_nd(block, &[0, 1, 2, 3], m, 3), "pixel {pixel} dim {dim} m {m}: not a (3,m,4)-net");
+                        let t = if m == 3 { 2 } else { 1 };
+                        assert!(is_net_nd(block, &[2, 3], m, t), "pixel {pixel} dim {dim} m {m}: light pair not a ({t},m,2)-net");
+                        assert!(is_net_nd(block, &[0, 1], m, 0), "pixel {pixel} dim {dim} m {m}: pixel pair not a (0,m,2)-net");
                     }
                 }
             }
