@@ -173,34 +173,10 @@ impl EnvLobe {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use super::super::env_product::tests::{map, random_unit};
     use crate::bsdf::microfacet::Microfacet;
     use crate::rng::Rng;
     use crate::sampling::Frame;
-
-    /// A map with a bright patch, a dim gradient and a black band.
-    fn map() -> EnvMap {
-        let (w, h) = (96, 48);
-        let texels = (0..w * h)
-            .map(|i| {
-                let (x, y) = (i % w, i / w);
-                if (40..46).contains(&x) && (10..14).contains(&y) {
-                    Vec3::splat(50.0)
-                } else if y > 40 {
-                    Vec3::ZERO
-                } else {
-                    Vec3::new(0.2 + x as f32 / w as f32, 0.5, 0.3 + y as f32 / h as f32)
-                }
-            })
-            .collect();
-        EnvMap::from_texels("test".into(), w, h, texels)
-    }
-
-    fn random_unit(rng: &mut Rng) -> Vec3 {
-        let z = 1.0 - 2.0 * rng.uniform();
-        let phi = 2.0 * std::f32::consts::PI * rng.uniform();
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        Vec3::new(r * phi.cos(), z, r * phi.sin())
-    }
 
     fn tables(env: &EnvMap) -> (&EnvProduct, &EnvLobe) {
         (env.product.as_ref().unwrap(), env.lobe.as_ref().unwrap())

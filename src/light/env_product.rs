@@ -254,12 +254,12 @@ impl EnvProduct {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::rng::Rng;
 
     /// A map with a bright patch, a dim gradient and a black band.
-    fn map() -> EnvMap {
+    pub(in crate::light) fn map() -> EnvMap {
         let (w, h) = (96, 48);
         let texels = (0..w * h)
             .map(|i| {
@@ -276,7 +276,7 @@ mod tests {
         EnvMap::from_texels("test".into(), w, h, texels)
     }
 
-    fn random_unit(rng: &mut Rng) -> Vec3 {
+    pub(in crate::light) fn random_unit(rng: &mut Rng) -> Vec3 {
         let z = 1.0 - 2.0 * rng.uniform();
         let phi = 2.0 * std::f32::consts::PI * rng.uniform();
         let r = (1.0 - z * z).max(0.0).sqrt();

@@ -45,37 +45,12 @@ pub fn sobol2(i: u32) -> (u32, u32) {
 /// (a loop over the bits mispredicts its branch on every other bit).
 #[inline]
 fn sobol_y_reversed(i: u32) -> u32 {
-    let t = &Y_REVERSED;
-    let lo = t[0][(i & 0xff) as usize];
-    if i < 256 {
-        return lo; // every render below 257 spp
-    }
-    lo ^ t[1][((i >> 8) & 0xff) as usize] ^ t[2][((i >> 16) & 0xff) as usize] ^ t[3][(i >> 24) as usize]
+    reversed_from(&Y_REVERSED, i)
 }
 
 /// `Y_REVERSED[b][v]`: the XOR of `DIRECTIONS[8b + t].reverse_bits()` over
 /// the set bits t of byte v.
-static Y_REVERSED: [[u32; 256]; 4] = {
-    let mut t = [[0u32; 256]; 4];
-    let mut b = 0;
-    while b < 4 {
-        let mut v = 0;
-        while v < 256 {
-            let mut x = 0u32;
-            let mut k = 0;
-            while k < 8 {
-                if v & (1 << k) != 0 {
-                    x ^= DIRECTIONS[8 * b + k].reverse_bits();
-                }
-                k += 1;
-            }
-            t[b][v] = x;
-            v += 1;
-        }
-        b += 1;
-    }
-    t
-};
+static Y_REVERSED: [[u32; 256]; 4] = reversed_tables(&DIRECTIONS);
 
 /// Direction words of Sobol dimensions 2 and 3 (Joe and Kuo's primitive
 /// polynomials x² + x + 1, m = {1, 3}, and x³ + x + 1, m = {1, 3, 1}):
@@ -111,6 +86,8 @@ const fn directions(s: usize, a: u32, m: [u32; 3]) -> [u32; 32] {
 static REVERSED_2: [[u32; 256]; 4] = reversed_tables(&DIRECTIONS_2);
 static REVERSED_3: [[u32; 256]; 4] = reversed_tables(&DIRECTIONS_3);
 
+/// Per byte b of an index and value v of that byte: the XOR of the
+/// reversed direction words `dirs[8b + t]` over the set bits t of v.
 const fn reversed_tables(dirs: &[u32; 32]) -> [[u32; 256]; 4] {
     let mut t = [[0u32; 256]; 4];
     let mut b = 0;
@@ -138,7 +115,7 @@ const fn reversed_tables(dirs: &[u32; 32]) -> [[u32; 256]; 4] {
 fn reversed_from(t: &[[u32; 256]; 4], i: u32) -> u32 {
     let lo = t[0][(i & 0xff) as usize];
     if i < 256 {
-        return lo;
+        return lo; // every render below 257 spp
     }
     lo ^ t[1][((i >> 8) & 0xff) as usize] ^ t[2][((i >> 16) & 0xff) as usize] ^ t[3][(i >> 24) as usize]
 }
