@@ -78,9 +78,8 @@ pub struct EnvLobe {
 
 impl EnvLobe {
     pub(super) fn build(pr: &EnvProduct) -> EnvLobe {
-        let n = pr.tile_axis.len();
-        let axes: Vec<[f64; 3]> = pr.tile_axis.iter().map(|a| a.as_dvec3().to_array()).collect();
-        let radii: Vec<f64> = (0..n).map(|k| (pr.tile_sin[k] as f64).atan2(pr.tile_cos[k] as f64)).collect();
+        let n = pr.cones.len();
+        let (axes, radii): (Vec<[f64; 3]>, Vec<f64>) = pr.cones.iter().copied().unzip();
         // Per bin (in parallel): each lit tile's angular gap to the bin's
         // cone, then the lists per level. Most tiles are far: a dot product
         // against the cosine of the widest reach (largest bin radius)

@@ -29,8 +29,8 @@ use std::f64::consts::PI;
 
 const TILES_X: usize = 64;
 const TILES_Y: usize = 32;
-pub(super) const BINS_T: usize = 16;
-pub(super) const BINS_P: usize = 32;
+const BINS_T: usize = 16;
+const BINS_P: usize = 32;
 /// Angular slack (radians) added to every cone radius, for the rounding of
 /// f32 directions.
 pub(super) const SLACK: f64 = 1e-3;
@@ -56,11 +56,10 @@ pub struct EnvProduct {
     row_cdf: Vec<f64>,
     row_cdf_at: Vec<usize>,
     /// Per tile: its share of the map's patch table, and its direction
-    /// cone (axis, cos and sin of the radius) in the map's world frame.
+    /// cone (unit axis, angular radius) in world space (`polar` with
+    /// φ' = π − φ is the map's own direction).
     pub(super) share: Vec<f64>,
-    pub(super) tile_axis: Vec<Vec3>,
-    pub(super) tile_cos: Vec<f32>,
-    pub(super) tile_sin: Vec<f32>,
+    pub(super) cones: Vec<([f64; 3], f64)>,
 }
 
 /// The unit vector at polar angle θ from +y and azimuth φ (any convention,
@@ -88,7 +87,7 @@ pub(super) fn cone(t0: f64, t1: f64, p0: f64, p1: f64) -> ([f64; 3], f64) {
 
 /// Normal bin of a unit vector: θ from +y, φ = atan2(z, x) in the same
 /// convention as `polar`.
-pub(super) fn bin_of(n: Vec3) -> usize {
+fn bin_of(n: Vec3) -> usize {
     let theta = (n.y as f64).clamp(-1.0, 1.0).acos();
     let phi = (n.z as f64).atan2(n.x as f64).rem_euclid(2.0 * PI);
     let i = ((theta / PI * BINS_T as f64) as usize).min(BINS_T - 1);
@@ -165,12 +164,7 @@ impl EnvProduct {
             }
         }
         row_cdf_at.push(row_cdf.len());
-        // `polar` with φ' = π − φ is the map's own direction: the cones are
-        // in world space.
-        let tile_axis = cones.iter().map(|(a, _)| Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32)).collect();
-        let tile_cos = cones.iter().map(|&(_, r)| r.cos() as f32).collect();
-        let tile_sin = cones.iter().map(|&(_, r)| r.sin() as f32).collect();
-        EnvProduct { col_start, row_start, tile_col, tile_row, bound, cdf, z, row_cdf, row_cdf_at, share, tile_axis, tile_cos, tile_sin }
+        EnvProduct { col_start, row_start, tile_col, tile_row, bound, cdf, z, row_cdf, row_cdf_at, share, cones }
     }
 
     fn tiles(&self) -> usize {

@@ -196,7 +196,7 @@ impl Light {
     }
 
     /// Solid-angle pdf of `sample` for an escaping direction (hemisphere
-    /// light, environment map), with the same `env_normal` as `sample`.
+    /// light, environment map), with the same `env_at` as `sample`.
     pub fn pdf_escape(&self, dir: Vec3, env_at: EnvAt) -> f32 {
         match self {
             Light::Hemisphere { .. } if dir.y > 0.0 => UNIFORM_HEMISPHERE_PDF,
@@ -216,9 +216,9 @@ impl Light {
     }
 
     /// Sample light arriving at `p`. `u` are two uniforms, `u_sel` a third
-    /// (triangle selection). An environment map is sampled by the map ×
-    /// the cosine bound of a receiver with shading normal `env_normal`
-    /// (`env_product`) where one is given, else by the map alone. `None`
+    /// (triangle selection). An environment map is sampled as `env_at`
+    /// says (`EnvAt`: the map alone, × a receiver's cosine bound, or inside
+    /// a glossy lobe). `None`
     /// when the sample carries no light (the back of a one-sided emitter, a
     /// degenerate configuration).
     pub fn sample(&self, scene: &Scene, p: Vec3, u: (f32, f32), u_sel: f32, env_at: EnvAt) -> Option<LightSample> {
@@ -501,7 +501,6 @@ impl Lights {
         self
     }
 
-    /// Radiance of the lights a ray escaping along `dir` sees.
     /// The environment map, if the scene has one.
     pub fn environment(&self) -> Option<&EnvMap> {
         self.lights.iter().find_map(|l| match l {
@@ -510,6 +509,7 @@ impl Lights {
         })
     }
 
+    /// Radiance of the lights a ray escaping along `dir` sees.
     pub fn escaped(&self, dir: Vec3) -> Vec3 {
         self.lights.iter().map(|l| l.escaped(dir)).sum()
     }

@@ -262,9 +262,8 @@ pub(super) struct Continuation {
     /// The product of the path's radiance scalings (η²) so far, which
     /// Russian roulette divides out of `beta`.
     pub radiance_scale: f32,
-    /// The vertex's shading normal where it sampled the environment by
-    /// the map × cosine bound (`PathTracer::env_normal`): this ray's
-    /// escape is weighted against that pdf.
+    /// How the vertex sampled the environment (`Vertex::env_at`): this
+    /// ray's escape is weighted against that pdf.
     pub env_at: EnvAt,
 }
 
@@ -280,4 +279,3 @@ pub(super) fn power_heuristic(a: f32, b: f32) -> f32 {
         0.0
     }
 }
-

@@ -441,4 +441,3 @@ fn guided_pdf(at: &GuideAt, local: Vec3, world: Vec3, from: Option<usize>) -> f3
     let q = at.fraction();
     (1.0 - q) * cosine_hemisphere_pdf(local.z) + q * at.pdf(world, from)
 }
-
