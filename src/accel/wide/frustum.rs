@@ -20,9 +20,12 @@
 //! test's operations on each lane, and the tie rule makes the closest hit
 //! independent of the order leaves are visited in.
 //!
-//! Packets whose rays cannot share an interval ray (a zero or mixed-sign
-//! direction component, an invalid ray) are traced one ray at a time, or,
-//! for shadow rays, with a ray mask per node (`masked`).
+//! Shadow packets of finite segments go to swept boxes first (`sweep`);
+//! the interval ray serves those the sweep refuses (rays to infinity, end
+//! points spread over a nearby area light). Packets whose rays cannot
+//! share an interval ray (a zero or mixed-sign direction component, an
+//! invalid ray) are traced one ray at a time, or, for shadow rays, with a
+//! ray mask per node (`masked`).
 
 use super::kernels::{intersect_group, intersect_group_x2, intersect_group_x4, LaneHit};
 use super::packet::RaysSoA;
@@ -44,7 +47,7 @@ use std::mem::MaybeUninit;
 /// shadow 4.6 -> 4.3. A plain budget of node visits also rescued arch and
 /// subdiv but halved grass:200k's camera rays (15.6 -> 8.4), whose packets
 /// go deep and stay tight.
-const WASTED_LEAF_TESTS: u32 = 32;
+pub(super) const WASTED_LEAF_TESTS: u32 = 32;
 
 /// Packets that gave up (tests check the fallback gives the same answers).
 #[cfg(test)]
@@ -230,6 +233,10 @@ impl<const W: usize> WideBvh<W> {
                 continue;
             }
             let soa = RaysSoA::new(r);
+            // Segments of finite length: swept boxes (`sweep`).
+            if self.any_sweep_packet(&soa, r, o, order) {
+                continue;
+            }
             match Frustum::of(&soa, true) {
                 Some(f) => self.frustum_packet::<true, WIDE>(&f, &soa, r, &mut unused, o, order),
                 // Fanned out or of mixed signs: a ray mask per node.

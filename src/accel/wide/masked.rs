@@ -1,5 +1,7 @@
-//! Shadow packets whose rays cannot share one interval ray — they fan out
-//! towards a nearby light, or mix direction signs — traced together with a
+//! Shadow packets that neither a swept box (`sweep`: rays to infinity, end
+//! points spread over a nearby area light) nor one interval ray can bound
+//! — they fan out towards a nearby light, or mix direction signs — traced
+//! together with a
 //! *ray mask per stacked node*, as Embree's stream traversal does: every
 //! node is tested by each ray that entered it (the single-ray slab test,
 //! 8 boxes per instruction), which gives each child the mask of the rays

@@ -22,6 +22,7 @@ mod interleave;
 mod kernels;
 mod layout;
 mod masked;
+mod sweep;
 mod packet;
 
 use kernels::{intersect_group, sort_far_first, LaneHit, Shear, Slab};

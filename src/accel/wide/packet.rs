@@ -52,6 +52,8 @@ pub(super) struct RaysSoA {
     s: [[f32; PACKET]; 3],
     /// The interval ray's bounds over all rays (`Frustum::of`).
     pub(super) bounds: IntervalBounds,
+    /// The directions, for the swept boxes' end points (`ends_of`).
+    d: [[f32; PACKET]; 3],
 }
 
 /// Per axis: the ranges of origins, reciprocals, raw directions and unit
@@ -143,6 +145,7 @@ impl RaysSoA {
                 tmin: 0.0,
                 uniform: false,
             },
+            d: [[0.0; PACKET]; 3],
         };
         let row = |i: usize| _mm256_loadu_ps(&rays[if i < rays.len() { i } else { 0 }] as *const Ray as *const f32);
         let zero = _mm256_setzero_ps();
@@ -163,6 +166,7 @@ impl RaysSoA {
             for a in 0..3 {
                 _mm256_storeu_ps(soa.o[a].as_mut_ptr().add(b), o[a]);
                 _mm256_storeu_ps(soa.inv[a].as_mut_ptr().add(b), inv[a]);
+                _mm256_storeu_ps(soa.d[a].as_mut_ptr().add(b), d[a]);
                 soa.neg[a] |= (_mm256_movemask_ps(d[a]) as u32) << b;
                 inv_ok &= !((!_mm256_movemask_ps(finite(inv[a])) as u32 & 0xff) << b);
             }
@@ -224,6 +228,52 @@ impl RaysSoA {
         }
         bd.tmin = hmin(keep[12][0], keep[12][1]);
         soa
+    }
+
+    /// Ray i's point at `t` on `axis`, for the 8 rays from `half`.
+    #[inline(always)]
+    unsafe fn at(&self, axis: usize, t: &[f32; PACKET], half: usize) -> __m256 {
+        let o = _mm256_loadu_ps(self.o[axis].as_ptr().add(half));
+        let d = _mm256_loadu_ps(self.d[axis].as_ptr().add(half));
+        _mm256_add_ps(o, _mm256_mul_ps(_mm256_loadu_ps(t.as_ptr().add(half)), d))
+    }
+
+    /// Bit i set when ray i's start point `o + tmin d` lies below `at` on
+    /// `axis`.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(super) unsafe fn starts_below(&self, axis: usize, at: f32) -> u32 {
+        let v = _mm256_set1_ps(at);
+        let lo = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(self.at(axis, &self.tmin, 0), v)) as u32;
+        let hi = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(self.at(axis, &self.tmin, 8), v)) as u32;
+        lo | hi << 8
+    }
+
+    /// Over the rays in `which` (bits; not empty), per axis: the range of
+    /// their start points `o + tmin d` ([0] low, [1] high) and of their
+    /// end points `o + tmax d` ([2], [3]), for the swept boxes (`sweep`).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(super) unsafe fn ends_of(&self, which: u32) -> [[f32; 3]; 4] {
+        let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        let m0 = _mm256_and_si256(_mm256_set1_epi32(which as i32 & 0xff), bit);
+        let m0 = _mm256_castsi256_ps(_mm256_cmpeq_epi32(m0, bit));
+        let m1 = _mm256_and_si256(_mm256_set1_epi32((which >> 8) as i32 & 0xff), bit);
+        let m1 = _mm256_castsi256_ps(_mm256_cmpeq_epi32(m1, bit));
+        let (inf, ninf) = (_mm256_set1_ps(f32::INFINITY), _mm256_set1_ps(f32::NEG_INFINITY));
+        let mut e = [[0.0; 3]; 4];
+        for (k, t) in [&self.tmin, &self.tmax].into_iter().enumerate() {
+            for axis in 0..3 {
+                let (a, b) = (self.at(axis, t, 0), self.at(axis, t, 8));
+                e[2 * k][axis] = hmin(_mm256_blendv_ps(inf, a, m0), _mm256_blendv_ps(inf, b, m1));
+                e[2 * k + 1][axis] = hmax(_mm256_blendv_ps(ninf, a, m0), _mm256_blendv_ps(ninf, b, m1));
+            }
+        }
+        e
     }
 
     /// The axis permutation `[kx, ky, kz]` every ray of the packet shares,
@@ -370,6 +420,37 @@ impl RaysSoA {
             for a in 0..3 {
                 let lo = _mm256_set1_ps(n.bounds[near_plane[a]][lane]);
                 let hi = _mm256_set1_ps(n.bounds[(near_plane[a] + 3) % 6][lane]);
+                let o = _mm256_loadu_ps(self.o[a].as_ptr().add(half));
+                let inv = _mm256_loadu_ps(self.inv[a].as_ptr().add(half));
+                let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
+                let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
+                t0 = _mm256_max_ps(tn, t0);
+                t1 = _mm256_min_ps(tf, t1);
+            }
+            mask |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u64) << half;
+        }
+        mask
+    }
+
+    /// `test` for rays whose direction signs may differ: each lane takes
+    /// its own ray's near plane (`Slab::new`'s choice), with the same
+    /// operations.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2; `W` must be 8.
+    #[inline(always)]
+    pub(super) unsafe fn test_signed<const W: usize>(&self, n: &super::Node<W>, lane: usize, tmax: &[f32; PACKET]) -> u64 {
+        let scale = _mm256_set1_ps(ROBUST_SCALE);
+        let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        let mut mask = 0u64;
+        for half in (0..PACKET).step_by(8) {
+            let mut t0 = _mm256_loadu_ps(self.tmin.as_ptr().add(half));
+            let mut t1 = _mm256_mul_ps(_mm256_loadu_ps(tmax.as_ptr().add(half)), scale);
+            for a in 0..3 {
+                let neg = _mm256_set1_epi32((self.neg[a] >> half) as i32 & 0xff);
+                let neg = _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(neg, bit), bit));
+                let (min, max) = (_mm256_set1_ps(n.bounds[a][lane]), _mm256_set1_ps(n.bounds[a + 3][lane]));
+                let (lo, hi) = (_mm256_blendv_ps(min, max, neg), _mm256_blendv_ps(max, min, neg));
                 let o = _mm256_loadu_ps(self.o[a].as_ptr().add(half));
                 let inv = _mm256_loadu_ps(self.inv[a].as_ptr().add(half));
                 let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);

@@ -35,6 +35,16 @@ pub(super) fn tight_packets(n: usize, seed: u64) -> Vec<Ray> {
     rays
 }
 
+/// Whether the CPU has AVX2, which the packet paths need; says loudly
+/// that `what` went untested where it has not.
+pub(super) fn avx_or_skip(what: &str) -> bool {
+    let ok = avx_available();
+    if !ok {
+        eprintln!("SKIPPED: this CPU has no AVX2; {what} were not exercised");
+    }
+    ok
+}
+
 pub(super) fn rays(shapes: &[Shape]) -> Vec<Ray> {
     let mut scene = procedural_scene(3000);
     scene.shapes = shapes.to_vec();
