@@ -232,11 +232,12 @@ impl<const W: usize> WideBvh<W> {
                 self.any_all_ordered::<true>(r, o, order);
                 continue;
             }
-            let soa = RaysSoA::new(r);
+            let mut soa = RaysSoA::new_with::<false>(r);
             // Segments of finite length: swept boxes (`sweep`).
             if self.any_sweep_packet(&soa, r, o, order) {
                 continue;
             }
+            soa.fill_bounds();
             match Frustum::of(&soa, true) {
                 Some(f) => self.frustum_packet::<true, WIDE>(&f, &soa, r, &mut unused, o, order),
                 // Fanned out or of mixed signs: a ray mask per node.

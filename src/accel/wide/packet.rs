@@ -54,6 +54,10 @@ pub(super) struct RaysSoA {
     pub(super) bounds: IntervalBounds,
     /// The directions, for the swept boxes' end points (`ends_of`).
     d: [[f32; PACKET]; 3],
+    /// Bit i: ray i's reciprocals are all finite.
+    inv_ok: u32,
+    /// Bit i: ray i's `tmax` is finite (it is a segment).
+    pub(super) finite_tmax: u32,
 }
 
 /// Per axis: the ranges of origins, reciprocals, raw directions and unit
@@ -121,6 +125,17 @@ impl RaysSoA {
     /// The CPU must have AVX2.
     #[inline(always)]
     pub(super) unsafe fn new(rays: &[Ray]) -> RaysSoA {
+        Self::new_with::<true>(rays)
+    }
+
+    /// `new`, with the interval bounds (`bounds`) only when `BOUNDS`: the
+    /// swept boxes (`sweep`) do without them, and `fill_bounds` makes them
+    /// later where a shadow packet goes the interval ray's way after all.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(super) unsafe fn new_with<const BOUNDS: bool>(rays: &[Ray]) -> RaysSoA {
         debug_assert!(!rays.is_empty() && rays.len() <= PACKET);
         let mut soa = RaysSoA {
             o: [[0.0; PACKET]; 3],
@@ -146,6 +161,8 @@ impl RaysSoA {
                 uniform: false,
             },
             d: [[0.0; PACKET]; 3],
+            inv_ok: u32::MAX,
+            finite_tmax: 0,
         };
         let row = |i: usize| _mm256_loadu_ps(&rays[if i < rays.len() { i } else { 0 }] as *const Ray as *const f32);
         let zero = _mm256_setzero_ps();
@@ -156,7 +173,6 @@ impl RaysSoA {
         // Per half: the fields, then the derived registers kept for the
         // reductions.
         let mut keep = [[zero; 2]; 13];
-        let mut inv_ok = u32::MAX;
         for half in 0..2 {
             let b = half * 8;
             let f = transpose(std::array::from_fn(|i| row(b + i)));
@@ -168,10 +184,11 @@ impl RaysSoA {
                 _mm256_storeu_ps(soa.inv[a].as_mut_ptr().add(b), inv[a]);
                 _mm256_storeu_ps(soa.d[a].as_mut_ptr().add(b), d[a]);
                 soa.neg[a] |= (_mm256_movemask_ps(d[a]) as u32) << b;
-                inv_ok &= !((!_mm256_movemask_ps(finite(inv[a])) as u32 & 0xff) << b);
+                soa.inv_ok &= !((!_mm256_movemask_ps(finite(inv[a])) as u32 & 0xff) << b);
             }
             _mm256_storeu_ps(soa.tmin.as_mut_ptr().add(b), tmin);
             _mm256_storeu_ps(soa.tmax.as_mut_ptr().add(b), tmax);
+            soa.finite_tmax |= (_mm256_movemask_ps(finite(tmax)) as u32) << b;
             // `Ray::is_valid`, lane by lane.
             let mut ok = _mm256_and_ps(_mm256_and_ps(finite(o[0]), finite(o[1])), _mm256_and_ps(finite(o[2]), finite(d[0])));
             ok = _mm256_and_ps(ok, _mm256_and_ps(finite(d[1]), finite(d[2])));
@@ -201,21 +218,55 @@ impl RaysSoA {
             _mm256_storeu_ps(soa.s[0].as_mut_ptr().add(b), _mm256_div_ps(nx, dz));
             _mm256_storeu_ps(soa.s[1].as_mut_ptr().add(b), _mm256_div_ps(ny, dz));
             _mm256_storeu_ps(soa.s[2].as_mut_ptr().add(b), _mm256_div_ps(one, dz));
-            // Unit directions, for the spread of shadow packets.
-            let len = _mm256_sqrt_ps(_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(d[0], d[0]), _mm256_mul_ps(d[1], d[1])), _mm256_mul_ps(d[2], d[2])));
-            let rlen = _mm256_div_ps(one, len);
-            for a in 0..3 {
-                keep[a][half] = o[a];
-                keep[3 + a][half] = inv[a];
-                keep[6 + a][half] = d[a];
-                keep[9 + a][half] = _mm256_mul_ps(d[a], rlen);
+            if BOUNDS {
+                soa.keep_half(&mut keep, half, o, inv, d, tmin);
             }
-            keep[12][half] = tmin;
         }
+        if BOUNDS {
+            soa.reduce_bounds(&keep);
+        }
+        soa
+    }
+
+    /// The registers the interval bounds reduce, for one half of the
+    /// packet: origins, reciprocals, directions, unit directions, tmin.
+    #[inline(always)]
+    unsafe fn keep_half(&self, keep: &mut [[__m256; 2]; 13], half: usize, o: [__m256; 3], inv: [__m256; 3], d: [__m256; 3], tmin: __m256) {
+        // Unit directions, for the spread of shadow packets.
+        let len = _mm256_sqrt_ps(_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(d[0], d[0]), _mm256_mul_ps(d[1], d[1])), _mm256_mul_ps(d[2], d[2])));
+        let rlen = _mm256_div_ps(_mm256_set1_ps(1.0), len);
+        for a in 0..3 {
+            keep[a][half] = o[a];
+            keep[3 + a][half] = inv[a];
+            keep[6 + a][half] = d[a];
+            keep[9 + a][half] = _mm256_mul_ps(d[a], rlen);
+        }
+        keep[12][half] = tmin;
+    }
+
+    /// `bounds` for a packet set up without them (`new_with::<false>`),
+    /// from its stored rays.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(super) unsafe fn fill_bounds(&mut self) {
+        let mut keep = [[_mm256_setzero_ps(); 2]; 13];
+        for half in 0..2 {
+            let b = half * 8;
+            let row = |v: &[f32; PACKET]| _mm256_loadu_ps(v.as_ptr().add(b));
+            let (o, inv, d) = ([0, 1, 2].map(|a| row(&self.o[a])), [0, 1, 2].map(|a| row(&self.inv[a])), [0, 1, 2].map(|a| row(&self.d[a])));
+            self.keep_half(&mut keep, half, o, inv, d, row(&self.tmin));
+        }
+        self.reduce_bounds(&keep);
+    }
+
+    #[inline(always)]
+    unsafe fn reduce_bounds(&mut self, keep: &[[__m256; 2]; 13]) {
         let all = (1u32 << PACKET) - 1;
-        let uniform_signs = soa.neg.iter().all(|&m| m == 0 || m == all);
-        let bd = &mut soa.bounds;
-        bd.uniform = soa.valid == all && inv_ok & all == all && uniform_signs;
+        let uniform_signs = self.neg.iter().all(|&m| m == 0 || m == all);
+        let bd = &mut self.bounds;
+        bd.uniform = self.valid == all && self.inv_ok & all == all && uniform_signs;
         for a in 0..3 {
             bd.o_lo[a] = hmin(keep[a][0], keep[a][1]);
             bd.o_hi[a] = hmax(keep[a][0], keep[a][1]);
@@ -227,7 +278,22 @@ impl RaysSoA {
             bd.unit_hi[a] = hmax(keep[9 + a][0], keep[9 + a][1]);
         }
         bd.tmin = hmin(keep[12][0], keep[12][1]);
-        soa
+    }
+
+    /// The largest |coordinate| of any ray's origin.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(super) unsafe fn origin_abs_max(&self) -> f32 {
+        let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+        let mut m = _mm256_setzero_ps();
+        for a in 0..3 {
+            for half in [0, 8] {
+                m = _mm256_max_ps(m, _mm256_and_ps(abs, _mm256_loadu_ps(self.o[a].as_ptr().add(half))));
+            }
+        }
+        hmax(m, m)
     }
 
     /// Ray i's point at `t` on `axis`, for the 8 rays from `half`.
@@ -281,12 +347,17 @@ impl RaysSoA {
     /// packet's rays repeat its first ray, so they never break uniformity.
     #[inline(always)]
     pub(super) fn shared_axes(&self) -> Option<[usize; 3]> {
-        let all = (1u32 << PACKET) - 1;
-        let uniform = |m: u32| m & all == 0 || m & all == all;
+        self.shared_axes_of((1u32 << PACKET) - 1)
+    }
+
+    /// `shared_axes` among the rays in `which` (bits; not empty).
+    #[inline(always)]
+    pub(super) fn shared_axes_of(&self, which: u32) -> Option<[usize; 3]> {
+        let uniform = |m: u32| m & which == 0 || m & which == which;
         if !(uniform(self.kz0) && uniform(self.kz1) && uniform(self.swap)) {
             return None;
         }
-        Some(self.shear(0).1.k)
+        Some(self.shear(which.trailing_zeros() as usize).1.k)
     }
 
     /// Bit r set when ray `8·half + r` hits triangle `lane` of `g` in

@@ -25,16 +25,29 @@
 //! points' box, again until each part is tight, and each part is traced as
 //! its own swept box (`any_sweep_packet`); a few rays left loose go alone.
 //!
+//! The packet set-up leaves out the interval ray's bounds (`RaysSoA::
+//! new_with::<false>`, a third of its reductions and a square root); the
+//! packets the sweep refuses make them afterwards (`fill_bounds`).
+//!
 //! Measured (2-vCPU AMD EPYC, 1 thread, Mrays/s, the bench's shadow rays,
-//! interval ray / ray masks as before -> swept boxes, nine alternating
-//! passes): arch:500k 31.4 -> 41.3, beetle 14.1 -> 18.2, maxplanck 8.2 ->
-//! 9.6, cow 23.8 -> 26.9, stadium:500k 16.3 -> 18.6, CBbunny 29.2 -> 29.4.
+//! best of four alternating runs of 7 passes): interval ray / ray masks as
+//! before -> swept boxes: arch:500k 34.1 -> 48.4 (Embree's stream 48.9),
+//! beetle 14.3 -> 18.9, maxplanck 8.2 -> 9.8, cow 24.3 -> 28.6,
+//! stadium:500k 16.5 -> 19.5, CBbunny 29.8 -> 32.4, subdiv:bunny:500k 3.4
+//! -> 4.4, sphere:1m 5.3 -> 5.6, grass:500k 0.42 -> 0.41. Of that, each
+//! part's own signs and axis permutation (not the packet's) gave arch 37
+//! -> 45, and the set-up without interval bounds 4-8 % everywhere.
+//! Path-traced images are bit-identical and their times unchanged
+//! (CBbunny, bunny: the renderer's shadow rays end on a nearby area light
+//! or at infinity, which the sweep leaves to the interval ray).
 //! Not kept: a ray mask per stacked node (each child the box enters
 //! tested by its parent's rays, 8 per instruction) — arch 34.6 against
-//! 41.3 (the swept box alone rarely enters a child no ray enters); with
-//! Embree's rule on top (the children the first ray enters inherit the
-//! parent's mask untested) 28.6; whole loose packets to the interval /
-//! masked paths instead of splitting them, arch 30.5.
+//! 41.3 at the time (the swept box alone rarely enters a child no ray
+//! enters); with Embree's rule on top (the children the first ray enters
+//! inherit the parent's mask untested) 28.6; whole loose packets to the
+//! interval / masked paths instead of splitting them, 30.5; a new swept
+//! box for the rays left once half are occluded, no gain (44.6 / 44.9);
+//! no prefetch of children, within 1 %.
 //!
 //! Conservative in floating point: the single-ray slab test may enter a
 //! box the exact segment misses by a few ulps of its length (and reach
@@ -62,21 +75,23 @@ use std::mem::MaybeUninit;
 /// 29.7 / 29.9, cow and stadium:500k within 2 %.
 const LOOSE: f32 = 0.2;
 
-/// The widest side of the start points' box (`at` 0) or of the end
-/// points' (`at` 2) as a fraction of the distance between the boxes'
-/// centres (NaN when that is zero, which counts as loose).
+/// Whether the start points' box (`at` 0) or the end points' (`at` 2) is
+/// wider, on its widest side, than `LOOSE` of the distance between the
+/// boxes' centres (a zero distance counts as loose). Squared: no root or
+/// division on the way to every packet's traversal.
 #[inline(always)]
-fn spread(e: &[[f32; 3]; 4], at: usize) -> f32 {
+fn loose(e: &[[f32; 3]; 4], at: usize) -> bool {
     let (mut ext, mut len2) = (0.0f32, 0.0f32);
     for a in 0..3 {
         ext = ext.max(e[at + 1][a] - e[at][a]);
         let d = 0.5 * (e[2][a] + e[3][a] - e[0][a] - e[1][a]);
         len2 += d * d;
     }
-    ext / len2.sqrt()
+    !(ext * ext < LOOSE * LOOSE * len2)
 }
 
-/// Loose parts this small go ray by ray.
+/// Loose parts this small go ray by ray (1, 2, 5 and 8 measured within 2 %
+/// of 3 on arch:500k, CBbunny, beetle and cow).
 const MIN_GROUP: u32 = 3;
 
 pub(super) struct Sweep {
@@ -91,11 +106,14 @@ impl Sweep {
     /// How far the moving box is widened: 2^-16 of the largest coordinate
     /// any ray of the packet reaches (its origin, or a point of its
     /// segment).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
     #[inline(always)]
-    fn pad(e: &[[f32; 3]; 4], soa: &RaysSoA) -> f32 {
-        let mut big = 0.0f32;
+    unsafe fn pad(e: &[[f32; 3]; 4], soa: &RaysSoA) -> f32 {
+        let mut big = soa.origin_abs_max();
         for a in 0..3 {
-            for x in [e[0][a], e[1][a], e[2][a], e[3][a], soa.bounds.o_lo[a], soa.bounds.o_hi[a]] {
+            for x in [e[0][a], e[1][a], e[2][a], e[3][a]] {
                 big = big.max(x.abs());
             }
         }
@@ -178,7 +196,7 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn any_sweep_packet(&self, soa: &RaysSoA, rays: &[Ray], out: &mut [bool], order: ChildOrder) -> bool {
         let n = rays.len();
         let all = (1u32 << n) - 1;
-        if soa.valid & all != all {
+        if soa.valid & soa.finite_tmax & all != all {
             return false;
         }
         let e = soa.ends_of(all);
@@ -186,16 +204,15 @@ impl<const W: usize> WideBvh<W> {
         for a in 0..3 {
             finite &= e[0][a].is_finite() & e[1][a].is_finite() & e[2][a].is_finite() & e[3][a].is_finite();
         }
-        if !finite || !(spread(&e, 2) <= LOOSE) {
+        if !finite || loose(&e, 2) {
             return false;
         }
-        let loose = |e: &[[f32; 3]; 4]| !(spread(e, 0) <= LOOSE);
         let pad = Sweep::pad(&e, soa);
         out[..n].fill(false);
         let mut groups = [0u32; PACKET];
         let (mut ng, mut g, mut e) = (0, all, e);
         loop {
-            if loose(&e) {
+            if loose(&e, 0) {
                 if g.count_ones() > MIN_GROUP {
                     let axis = (0..3).fold(0, |m, a| if e[1][a] - e[0][a] > e[1][m] - e[0][m] { a } else { m });
                     let below = soa.starts_below(axis, 0.5 * (e[0][axis] + e[1][axis])) & g;
@@ -243,10 +260,18 @@ impl<const W: usize> WideBvh<W> {
         let mut tmax = [0.0f32; PACKET];
         tmax[..n].copy_from_slice(&soa.tmax[..n]);
         let mut active = which as u64;
-        let all = (1u32 << PACKET) - 1;
-        let signed = soa.neg.iter().any(|&m| m & all != 0 && m & all != all);
-        let near_plane = [0, 1, 2].map(|a| if soa.neg[a] & 1 != 0 { 3 + a } else { a });
-        let shared_axes = soa.shared_axes();
+        // Signs and axis permutation shared by these rays, not the packet's.
+        let first = which.trailing_zeros();
+        let mut signed = false;
+        let mut near_plane = [0, 1, 2];
+        for a in 0..3 {
+            let m = soa.neg[a] & which;
+            signed |= m != 0 && m != which;
+            if soa.neg[a] >> first & 1 != 0 {
+                near_plane[a] = 3 + a;
+            }
+        }
+        let shared_axes = soa.shared_axes_of(which);
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut shears: [MaybeUninit<super::Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut setup: u64 = 0;
@@ -411,7 +436,7 @@ mod tests {
                     // SAFETY: AVX2 checked above.
                     let soa = unsafe { RaysSoA::new(p) };
                     // SAFETY: as above.
-                    let pad = Sweep::pad(&unsafe { soa.ends_of(u16::MAX as u32) }, &soa);
+                    let pad = unsafe { Sweep::pad(&soa.ends_of(u16::MAX as u32), &soa) };
                     for w in [u16::MAX as u32, (rng.next_u32() & 0xffff) | 1] {
                         // SAFETY: as above.
                         let sw = Sweep::new(&unsafe { soa.ends_of(w) }, pad);
