@@ -2,7 +2,7 @@
 # Runs `pathtracer bench` (standard scenes, all backends) and puts its Markdown output into
 # docs/bench.md and into README.md between the bench markers, so that the README's performance
 # tables are the benchmark's output, never typed. Built with the peer BVH libraries
-# (--features peers: obvhs). Takes about 15 minutes on 2 cores (the 1M-10M-triangle
+# (--features peers: obvhs). Takes about 21 minutes on 2 cores (the 1M-10M-triangle
 # generated scenes). `--paste-only` skips the run and pastes the existing docs/bench.md.
 set -euo pipefail
 cd "$(dirname "$0")/.."
