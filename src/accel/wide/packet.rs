@@ -483,24 +483,7 @@ impl RaysSoA {
     /// The CPU must have AVX2; `W` must be 8.
     #[inline(always)]
     pub(super) unsafe fn test<const W: usize>(&self, near_plane: &[usize; 3], n: &super::Node<W>, lane: usize, tmax: &[f32; PACKET]) -> u64 {
-        let scale = _mm256_set1_ps(ROBUST_SCALE);
-        let mut mask = 0u64;
-        for half in (0..PACKET).step_by(8) {
-            let mut t0 = _mm256_loadu_ps(self.tmin.as_ptr().add(half));
-            let mut t1 = _mm256_mul_ps(_mm256_loadu_ps(tmax.as_ptr().add(half)), scale);
-            for a in 0..3 {
-                let lo = _mm256_set1_ps(n.bounds[near_plane[a]][lane]);
-                let hi = _mm256_set1_ps(n.bounds[(near_plane[a] + 3) % 6][lane]);
-                let o = _mm256_loadu_ps(self.o[a].as_ptr().add(half));
-                let inv = _mm256_loadu_ps(self.inv[a].as_ptr().add(half));
-                let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-                let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
-                t0 = _mm256_max_ps(tn, t0);
-                t1 = _mm256_min_ps(tf, t1);
-            }
-            mask |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u64) << half;
-        }
-        mask
+        self.slab_lanes::<W, false>(near_plane, n, lane, tmax)
     }
 
     /// `test` for rays whose direction signs may differ: each lane takes
@@ -511,6 +494,12 @@ impl RaysSoA {
     /// The CPU must have AVX2; `W` must be 8.
     #[inline(always)]
     pub(super) unsafe fn test_signed<const W: usize>(&self, n: &super::Node<W>, lane: usize, tmax: &[f32; PACKET]) -> u64 {
+        self.slab_lanes::<W, true>(&[0, 1, 2], n, lane, tmax)
+    }
+
+    /// `test` (`SIGNED`: `test_signed`, `near_plane` unused).
+    #[inline(always)]
+    unsafe fn slab_lanes<const W: usize, const SIGNED: bool>(&self, near_plane: &[usize; 3], n: &super::Node<W>, lane: usize, tmax: &[f32; PACKET]) -> u64 {
         let scale = _mm256_set1_ps(ROBUST_SCALE);
         let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
         let mut mask = 0u64;
@@ -518,10 +507,14 @@ impl RaysSoA {
             let mut t0 = _mm256_loadu_ps(self.tmin.as_ptr().add(half));
             let mut t1 = _mm256_mul_ps(_mm256_loadu_ps(tmax.as_ptr().add(half)), scale);
             for a in 0..3 {
-                let neg = _mm256_set1_epi32((self.neg[a] >> half) as i32 & 0xff);
-                let neg = _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(neg, bit), bit));
-                let (min, max) = (_mm256_set1_ps(n.bounds[a][lane]), _mm256_set1_ps(n.bounds[a + 3][lane]));
-                let (lo, hi) = (_mm256_blendv_ps(min, max, neg), _mm256_blendv_ps(max, min, neg));
+                let (lo, hi) = if SIGNED {
+                    let neg = _mm256_set1_epi32((self.neg[a] >> half) as i32 & 0xff);
+                    let neg = _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(neg, bit), bit));
+                    let (min, max) = (_mm256_set1_ps(n.bounds[a][lane]), _mm256_set1_ps(n.bounds[a + 3][lane]));
+                    (_mm256_blendv_ps(min, max, neg), _mm256_blendv_ps(max, min, neg))
+                } else {
+                    (_mm256_set1_ps(n.bounds[near_plane[a]][lane]), _mm256_set1_ps(n.bounds[(near_plane[a] + 3) % 6][lane]))
+                };
                 let o = _mm256_loadu_ps(self.o[a].as_ptr().add(half));
                 let inv = _mm256_loadu_ps(self.inv[a].as_ptr().add(half));
                 let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
