@@ -63,16 +63,14 @@ use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use std::mem::MaybeUninit;
 
-/// Per axis, the moving box's two sides as `side(s) = at0 + s · rate`
-/// (low side first), with `1 / rate` and the clamp that turns each side's
-/// crossing into a lower or an upper bound on s.
 /// A packet (or part) is *loose* when its start points' box is wider, on
 /// its longest side, than this fraction of the distance from the start
 /// points' centre to the end points'; loose packets are split (see
 /// `any_sweep_packet`). Measured (1 thread, Mrays/s, shadow rays, nine
-/// alternating passes): 0.1 / 0.15 / 0.2 / 0.25 — arch:500k 34.6 / 38.8 /
-/// 41.9 / 39.3, beetle 17.1 / 17.7 / 18.2 / 18.3, CBbunny 27.4 / 29.0 /
-/// 29.7 / 29.9, cow and stadium:500k within 2 %.
+/// alternating passes, before parts had their own signs): 0.1 / 0.15 /
+/// 0.2 / 0.25 — arch:500k 34.6 / 38.8 / 41.9 / 39.3, beetle 17.1 / 17.7 /
+/// 18.2 / 18.3, CBbunny 27.4 / 29.0 / 29.7 / 29.9, cow and stadium:500k
+/// within 2 %.
 const LOOSE: f32 = 0.2;
 
 /// Whether the start points' box (`at` 0) or the end points' (`at` 2) is
@@ -94,6 +92,9 @@ fn loose(e: &[[f32; 3]; 4], at: usize) -> bool {
 /// of 3 on arch:500k, CBbunny, beetle and cow).
 const MIN_GROUP: u32 = 3;
 
+/// Per axis, the moving box's two sides as `side(s) = at0 + s · rate`
+/// (low side first), with `1 / rate` and the clamp that turns each side's
+/// crossing into a lower or an upper bound on s.
 pub(super) struct Sweep {
     at0: [[f32; 3]; 2],
     inv_rate: [[f32; 3]; 2],
