@@ -466,6 +466,58 @@ impl<const W: usize> WideBvh<W> {
         rays_in & !left
     }
 
+    /// Which of the rays `rays_in` (bits) `leaf` occludes, each as it would
+    /// alone: with one axis permutation `shared_axes` for a triangle-only
+    /// leaf, 8 rays against one triangle at a time (`leaf_rays_x8`); else
+    /// two at a time through triangle-only leaves (`leaf_pair`), one at a
+    /// time where spheres are, each ray's shear made the first time it
+    /// reaches a leaf (bit i of `setup`). For the occlusion traversals
+    /// (`sweep`, `masked`).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2; every ray in `rays_in` is valid.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) unsafe fn leaf_occluded(
+        &self,
+        leaf: &super::Leaf,
+        soa: &RaysSoA,
+        rays: &[Ray],
+        mut rays_in: u64,
+        shared_axes: Option<[usize; 3]>,
+        tmax: &mut [f32; PACKET],
+        setup: &mut u64,
+        rts: &mut [MaybeUninit<RayTransform>; PACKET],
+        shears: &mut [MaybeUninit<Shear>; PACKET],
+    ) -> u64 {
+        if let Some(k) = shared_axes.filter(|_| leaf.n_spheres == 0) {
+            return self.leaf_rays_x8(leaf, soa, rays_in, k, tmax);
+        }
+        let mut found = 0u64;
+        while rays_in != 0 {
+            let i = rays_in.trailing_zeros() as usize;
+            rays_in &= rays_in - 1;
+            let j = (rays_in != 0 && leaf.n_spheres == 0).then(|| rays_in.trailing_zeros() as usize);
+            for k in [Some(i), j].into_iter().flatten() {
+                if *setup & (1u64 << k) == 0 {
+                    *setup |= 1u64 << k;
+                    let (rt, sh) = soa.shear(k);
+                    shears[k].write(sh);
+                    rts[k].write(rt);
+                }
+            }
+            if let Some(j) = j {
+                rays_in &= rays_in - 1;
+                // Occlusion never writes a hit: no hit slots needed.
+                let hit = self.leaf_pair::<true>(leaf, [i, j], rays, rts, shears, tmax, &mut []);
+                found |= (hit[0] as u64) << i | (hit[1] as u64) << j;
+            } else if self.leaf(leaf, &rays[i], rts[i].assume_init_ref(), shears[i].assume_init_ref(), tmax[i], &mut |_: Hit| true) {
+                found |= 1u64 << i;
+            }
+        }
+        found
+    }
+
     /// A triangle-only leaf for rays `ij` together (`intersect_group_x2`),
     /// as `leaf` would for each: every group tested with the range each ray
     /// had on entering the leaf, closest hits kept by the tie rule. With

@@ -68,8 +68,7 @@ impl<const W: usize> WideBvh<W> {
             return;
         }
         // Triangle-test constants, made the first time a ray reaches a leaf.
-        let mut setup: u32 = 0;
-        let mut unused = [None; PACKET];
+        let mut setup: u64 = 0;
         // One axis permutation for all rays: leaves as in `frustum_packet`.
         let shared_axes = soa.shared_axes();
         // Stack of (node, the rays that entered it, their nearest entry).
@@ -99,7 +98,7 @@ impl<const W: usize> WideBvh<W> {
             _mm256_storeu_ps(child_near.as_mut_ptr(), near);
             let base = sp;
             for lane in 0..W {
-                let (child, mut r) = (node.child[lane], child_rays[lane] & active);
+                let (child, r) = (node.child[lane], child_rays[lane] & active);
                 if r == 0 || child == EMPTY {
                     continue;
                 }
@@ -112,44 +111,11 @@ impl<const W: usize> WideBvh<W> {
                 // A leaf: the rays that entered it test its triangles, two at
                 // a time where it holds only triangles.
                 let leaf = self.leaf_of(child);
-                if let Some(k) = shared_axes.filter(|_| leaf.n_spheres == 0) {
-                    let mut found = self.leaf_rays_x8(&leaf, soa, r as u64, k, &tmax) as u32;
-                    active &= !found;
-                    while found != 0 {
-                        out[found.trailing_zeros() as usize] = true;
-                        found &= found - 1;
-                    }
-                    continue;
-                }
-                macro_rules! ensure {
-                    ($k:expr) => {
-                        if setup & (1 << $k) == 0 {
-                            setup |= 1 << $k;
-                            let (rt, sh) = soa.shear($k);
-                            shears[$k].write(sh);
-                            rts[$k].write(rt);
-                        }
-                    };
-                }
-                while r != 0 {
-                    let i = r.trailing_zeros() as usize;
-                    r &= r - 1;
-                    ensure!(i);
-                    if r != 0 && leaf.n_spheres == 0 {
-                        let j = r.trailing_zeros() as usize;
-                        r &= r - 1;
-                        ensure!(j);
-                        let found = self.leaf_pair::<true>(&leaf, [i, j], rays, &rts, &shears, &mut tmax, &mut unused);
-                        for (k, hit) in [i, j].into_iter().zip(found) {
-                            if hit {
-                                out[k] = true;
-                                active &= !(1 << k);
-                            }
-                        }
-                    } else if self.leaf(&leaf, &rays[i], rts[i].assume_init_ref(), shears[i].assume_init_ref(), tmax[i], &mut |_: crate::accel::Hit| true) {
-                        out[i] = true;
-                        active &= !(1 << i);
-                    }
+                let mut found = self.leaf_occluded(&leaf, soa, rays, r as u64, shared_axes, &mut tmax, &mut setup, &mut rts, &mut shears) as u32;
+                active &= !found;
+                while found != 0 {
+                    out[found.trailing_zeros() as usize] = true;
+                    found &= found - 1;
                 }
                 if active == 0 {
                     return;

@@ -276,7 +276,6 @@ impl<const W: usize> WideBvh<W> {
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut shears: [MaybeUninit<super::Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut setup: u64 = 0;
-        let mut unused = [None; PACKET];
         let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
         let mut sp = 0;
         let mut cur = self.root;
@@ -311,40 +310,14 @@ impl<const W: usize> WideBvh<W> {
             while todo != 0 {
                 let lane = todo.trailing_zeros() as usize;
                 todo &= todo - 1;
-                let mut rays_in = if signed { soa.test_signed(node, lane, &tmax) } else { soa.test(&near_plane, node, lane, &tmax) } & active;
+                let rays_in = if signed { soa.test_signed(node, lane, &tmax) } else { soa.test(&near_plane, node, lane, &tmax) } & active;
                 if rays_in == 0 {
                     wasted += 1;
                     continue;
                 }
                 useful += 1;
                 let leaf = self.leaf_of(node.child[lane]);
-                let found = if let Some(k) = shared_axes.filter(|_| leaf.n_spheres == 0) {
-                    self.leaf_rays_x8(&leaf, soa, rays_in, k, &tmax)
-                } else {
-                    let mut found = 0u64;
-                    while rays_in != 0 {
-                        let i = rays_in.trailing_zeros() as usize;
-                        rays_in &= rays_in - 1;
-                        // Two at a time through triangle-only leaves.
-                        let j = (rays_in != 0 && leaf.n_spheres == 0).then(|| rays_in.trailing_zeros() as usize);
-                        for k in [Some(i), j].into_iter().flatten() {
-                            if setup & (1u64 << k) == 0 {
-                                setup |= 1u64 << k;
-                                let (rt, sh) = soa.shear(k);
-                                shears[k].write(sh);
-                                rts[k].write(rt);
-                            }
-                        }
-                        if let Some(j) = j {
-                            rays_in &= rays_in - 1;
-                            let hit = self.leaf_pair::<true>(&leaf, [i, j], rays, &rts, &shears, &mut tmax, &mut unused);
-                            found |= (hit[0] as u64) << i | (hit[1] as u64) << j;
-                        } else if self.leaf(&leaf, &rays[i], rts[i].assume_init_ref(), shears[i].assume_init_ref(), tmax[i], &mut |_: crate::accel::Hit| true) {
-                            found |= 1u64 << i;
-                        }
-                    }
-                    found
-                };
+                let found = self.leaf_occluded(&leaf, soa, rays, rays_in, shared_axes, &mut tmax, &mut setup, &mut rts, &mut shears);
                 if found != 0 {
                     active &= !found;
                     let mut f = found;
