@@ -175,10 +175,18 @@ impl RaysSoA {
         let mut keep = [[zero; 2]; 13];
         for half in 0..2 {
             let b = half * 8;
-            let f = transpose(std::array::from_fn(|i| row(b + i)));
+            // Arrays of intrinsics are spelled out here and below, never
+            // built with `std::array::from_fn` or `[_; N]::map`: when the
+            // compiler does not inline those generic helpers, the closure
+            // is compiled without AVX and each load becomes a call. A build
+            // with `--features peers` (other code-generation units) did
+            // exactly that: CBbunny camera rays 56 Mrays/s against 68, cow
+            // 58 against 71, arch:500k shadow rays 49 against 56.
+            // `tests/simd_inlined.rs` checks the binary for such calls.
+            let f = transpose([row(b), row(b + 1), row(b + 2), row(b + 3), row(b + 4), row(b + 5), row(b + 6), row(b + 7)]);
             let (o, d) = ([f[0], f[1], f[2]], [f[3], f[4], f[5]]);
             let (tmin, tmax) = (f[6], f[7]);
-            let inv = [0, 1, 2].map(|a| _mm256_div_ps(one, d[a]));
+            let inv = [_mm256_div_ps(one, d[0]), _mm256_div_ps(one, d[1]), _mm256_div_ps(one, d[2])];
             for a in 0..3 {
                 _mm256_storeu_ps(soa.o[a].as_mut_ptr().add(b), o[a]);
                 _mm256_storeu_ps(soa.inv[a].as_mut_ptr().add(b), inv[a]);
@@ -204,7 +212,7 @@ impl RaysSoA {
             // The shear of `RayTransform::new`: the dominant axis kz (x
             // when |x| is largest, ties to the lower axis), kx and ky after
             // it, swapped when d[kz] < 0; s = (d[kx], d[ky], 1) / d[kz].
-            let ad = d.map(|x| _mm256_and_ps(x, abs));
+            let ad = [_mm256_and_ps(d[0], abs), _mm256_and_ps(d[1], abs), _mm256_and_ps(d[2], abs)];
             let is_x = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(ad[0], ad[1]), _mm256_cmp_ps::<_CMP_GE_OQ>(ad[0], ad[2]));
             let is_y = _mm256_andnot_ps(is_x, _mm256_cmp_ps::<_CMP_GE_OQ>(ad[1], ad[2]));
             let pick = |x: __m256, y: __m256, z: __m256| _mm256_blendv_ps(_mm256_blendv_ps(z, y, is_y), x, is_x);
@@ -255,7 +263,9 @@ impl RaysSoA {
         for half in 0..2 {
             let b = half * 8;
             let row = |v: &[f32; PACKET]| _mm256_loadu_ps(v.as_ptr().add(b));
-            let (o, inv, d) = ([0, 1, 2].map(|a| row(&self.o[a])), [0, 1, 2].map(|a| row(&self.inv[a])), [0, 1, 2].map(|a| row(&self.d[a])));
+            // Spelled out, not `[0, 1, 2].map(..)`: see `new_with`.
+            let rows = |v: &[[f32; PACKET]; 3]| [row(&v[0]), row(&v[1]), row(&v[2])];
+            let (o, inv, d) = (rows(&self.o), rows(&self.inv), rows(&self.d));
             self.keep_half(&mut keep, half, o, inv, d, row(&self.tmin));
         }
         self.reduce_bounds(&keep);
