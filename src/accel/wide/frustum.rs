@@ -28,6 +28,7 @@
 //! ray mask per node (`masked`).
 
 use super::kernels::{intersect_group, intersect_group_x2, intersect_group_x4, LaneHit};
+use super::occluders::OccluderCache;
 use super::packet::RaysSoA;
 use super::{Shear, WideBvh, EMPTY, LANES, LEAF_BIT, STACK};
 use crate::accel::bvh::ROBUST_SCALE;
@@ -227,22 +228,29 @@ impl<const W: usize> WideBvh<W> {
     unsafe fn any_packets<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool]) {
         let mut unused = [None; PACKET];
         let order = self.any_order::<true>(rays);
+        let mut cache = OccluderCache::default();
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             if self.root & LEAF_BIT != 0 || r.len() < 2 {
                 self.any_all_ordered::<true>(r, o, order);
                 continue;
             }
             let mut soa = RaysSoA::new_with::<false>(r);
-            // Segments of finite length: swept boxes (`sweep`).
-            if self.any_sweep_packet(&soa, r, o, order) {
+            let pre = cache.occluded(self, &soa, r.len());
+            if pre == (1u32 << r.len()) - 1 {
+                o.fill(true);
                 continue;
             }
-            soa.fill_bounds();
-            match Frustum::of(&soa, true) {
-                Some(f) => self.frustum_packet::<true, WIDE>(&f, &soa, r, &mut unused, o, order),
-                // Fanned out or of mixed signs: a ray mask per node.
-                None => self.any_masked(&soa, r, o, order),
+            // Segments of finite length: swept boxes (`sweep`), of the rays
+            // the cache left.
+            if !self.any_sweep_packet(&soa, r, o, order, pre) {
+                soa.fill_bounds();
+                match Frustum::of(&soa, true) {
+                    Some(f) => self.frustum_packet::<true, WIDE>(&f, &soa, r, &mut unused, o, order),
+                    // Fanned out or of mixed signs: a ray mask per node.
+                    None => self.any_masked(&soa, r, o, order),
+                }
             }
+            cache.record(soa.occluder.get());
         }
     }
 
@@ -455,6 +463,9 @@ impl<const W: usize> WideBvh<W> {
                 for half in 0..PACKET / 8 {
                     if (left >> (8 * half)) & 0xff != 0 {
                         let hit = soa.hits_triangle(g, lane, half, k, tmax) as u64 & (left >> (8 * half)) & 0xff;
+                        if hit != 0 {
+                            soa.occluder.set(gi * LANES as u32 + lane as u32);
+                        }
                         left &= !(hit << (8 * half));
                     }
                 }

@@ -22,6 +22,7 @@ mod interleave;
 mod kernels;
 mod layout;
 mod masked;
+mod occluders;
 mod sweep;
 mod packet;
 

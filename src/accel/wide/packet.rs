@@ -58,7 +58,14 @@ pub(super) struct RaysSoA {
     inv_ok: u32,
     /// Bit i: ray i's `tmax` is finite (it is a segment).
     pub(super) finite_tmax: u32,
+    /// The last triangle found to occlude rays of this packet by
+    /// `leaf_rays_x8`, as `group · LANES + lane` (`NO_OCCLUDER`: none), for the
+    /// next packet's occluder cache (`frustum::OccluderCache`).
+    pub(super) occluder: std::cell::Cell<u32>,
 }
+
+/// `RaysSoA::occluder` when no triangle was recorded.
+pub(super) const NO_OCCLUDER: u32 = u32::MAX;
 
 /// Per axis: the ranges of origins, reciprocals, raw directions and unit
 /// directions; and the smallest `tmin`. Meaningful only when every ray is
@@ -163,6 +170,7 @@ impl RaysSoA {
             d: [[0.0; PACKET]; 3],
             inv_ok: u32::MAX,
             finite_tmax: 0,
+            occluder: std::cell::Cell::new(NO_OCCLUDER),
         };
         let row = |i: usize| _mm256_loadu_ps(&rays[if i < rays.len() { i } else { 0 }] as *const Ray as *const f32);
         let zero = _mm256_setzero_ps();

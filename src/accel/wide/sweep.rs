@@ -194,13 +194,15 @@ impl<const W: usize> WideBvh<W> {
     /// node.
     #[target_feature(enable = "avx2")]
     #[inline(never)]
-    pub(super) unsafe fn any_sweep_packet(&self, soa: &RaysSoA, rays: &[Ray], out: &mut [bool], order: ChildOrder) -> bool {
+    pub(super) unsafe fn any_sweep_packet(&self, soa: &RaysSoA, rays: &[Ray], out: &mut [bool], order: ChildOrder, occluded: u32) -> bool {
         let n = rays.len();
         let all = (1u32 << n) - 1;
         if soa.valid & soa.finite_tmax & all != all {
             return false;
         }
-        let e = soa.ends_of(all);
+        let live = all & !occluded;
+        debug_assert!(live != 0);
+        let e = soa.ends_of(live);
         let mut finite = true;
         for a in 0..3 {
             finite &= e[0][a].is_finite() & e[1][a].is_finite() & e[2][a].is_finite() & e[3][a].is_finite();
@@ -209,9 +211,11 @@ impl<const W: usize> WideBvh<W> {
             return false;
         }
         let pad = Sweep::pad(&e, soa);
-        out[..n].fill(false);
+        for (i, o) in out[..n].iter_mut().enumerate() {
+            *o = occluded >> i & 1 != 0;
+        }
         let mut groups = [0u32; PACKET];
-        let (mut ng, mut g, mut e) = (0, all, e);
+        let (mut ng, mut g, mut e) = (0, live, e);
         loop {
             if loose(&e, 0) {
                 if g.count_ones() > MIN_GROUP {
