@@ -59,8 +59,8 @@ pub(super) struct RaysSoA {
     /// Bit i: ray i's `tmax` is finite (it is a segment).
     pub(super) finite_tmax: u32,
     /// The last triangle found to occlude rays of this packet by
-    /// `leaf_rays_x8`, as `group · LANES + lane` (`NO_OCCLUDER`: none), for the
-    /// next packet's occluder cache (`frustum::OccluderCache`).
+    /// `leaf_rays_x8`, as `group · LANES + lane` (`NO_OCCLUDER`: none), for
+    /// the next packet's occluder cache (`occluders::OccluderCache`).
     pub(super) occluder: std::cell::Cell<u32>,
 }
 

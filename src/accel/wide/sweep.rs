@@ -187,7 +187,9 @@ impl<const W: usize> WideBvh<W> {
     /// packet whose start points spread that wide is split at the middle
     /// of their box's longest side, again and again, and each part traced
     /// as its own swept box; parts of `MIN_GROUP` rays or fewer that are
-    /// still loose go ray by ray.
+    /// still loose go ray by ray. The rays in `occluded` (bits; found by
+    /// the occluder cache, not all of them) are answered `true` and left
+    /// out of the swept boxes.
     ///
     /// # Safety
     /// The CPU must have AVX2; `W` must be 8; the root must be an interior
