@@ -208,17 +208,7 @@ enum RayKind {
 /// timed passes (cow camera rays, 1 thread: 39-54 Mrays/s in four of seven
 /// runs, 65-66 in the others), as if the CPU were still clocking up.
 fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize, reps: usize) -> f64 {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
-    let mut best = f64::INFINITY;
-    let warm_up = (reps > 1) as usize;
-    for rep in 0..reps + warm_up {
-        let start = Instant::now();
-        pool.install(|| trace_pass(accel, rays, kind));
-        if rep >= warm_up {
-            best = best.min(start.elapsed().as_secs_f64());
-        }
-    }
-    rays.len() as f64 / best / 1e6
+    timed_passes(&[accel], rays, kind, threads, reps, reps > 1)[0]
 }
 
 /// Timed passes per contender in `throughputs`.
@@ -232,13 +222,20 @@ const PASSES: usize = 5;
 /// read native ÷ Embree 0.63 in a full bench run and 1.01 / 0.99 in two
 /// runs of that scene alone, with the same binary.
 fn throughputs(accels: &[&dyn Traversal], rays: &[Ray], kind: RayKind, threads: usize, passes: usize) -> Vec<f64> {
+    timed_passes(accels, rays, kind, threads, passes, true)
+}
+
+/// Mrays/s of each of `accels`: `passes` rounds of one timed pass each,
+/// after one untimed round when `warm_up`, the best pass of each kept.
+fn timed_passes(accels: &[&dyn Traversal], rays: &[Ray], kind: RayKind, threads: usize, passes: usize, warm_up: bool) -> Vec<f64> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
     let mut best = vec![f64::INFINITY; accels.len()];
-    for pass in 0..=passes {
+    let skip = warm_up as usize;
+    for pass in 0..passes + skip {
         for (a, b) in accels.iter().zip(best.iter_mut()) {
             let start = Instant::now();
             pool.install(|| trace_pass(*a, rays, kind));
-            if pass > 0 {
+            if pass >= skip {
                 *b = b.min(start.elapsed().as_secs_f64());
             }
         }
