@@ -48,6 +48,15 @@ pub struct BenchArgs {
     /// Leave out the peer libraries built in with `--features peers` (obvhs)
     #[arg(long)]
     pub no_peers: bool,
+    /// Timed passes per contender, ray kind and thread count (the best is
+    /// kept; one untimed pass comes first)
+    #[arg(long, default_value_t = PASSES, value_parser = clap::builder::TypedValueParser::map(clap::value_parser!(u32).range(1..=100), |n| n as usize))]
+    pub passes: usize,
+    /// Only the build and throughput tables: no SAH statistics (a child run
+    /// that builds the scene again), no Embree batch-call table, no renders.
+    /// For thread-scaling runs on a borrowed machine, where minutes count
+    #[arg(long)]
+    pub throughput_only: bool,
     /// Thread counts to time throughput at, e.g. 1,2,4,8,16 [default: 1 and
     /// every thread of the machine]. With three or more, a thread-scaling
     /// table follows the throughput table. Builds always use every thread.
@@ -212,7 +221,7 @@ fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize
 }
 
 /// Timed passes per contender in `throughputs`.
-const PASSES: usize = 5;
+pub const PASSES: usize = 5;
 
 /// `throughput` for several structures on the same rays, their passes
 /// alternating — one untimed pass each, then `passes` rounds of one timed
@@ -468,11 +477,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let brute = Contender::Backend(BackendKind::Brute);
     let names: Vec<String> = if args.scenes.is_empty() { DEFAULT_SCENES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     let thread_counts = thread_counts(&args.threads, all)?;
+    let no_render = args.no_render || args.throughput_only;
     let threads_said = thread_counts.iter().map(|t| t.to_string()).collect::<Vec<_>>().join(", ");
     let mut md = String::new();
     let mut samples: Vec<Sample> = Vec::new();
     let _ = writeln!(md, "Machine: {}, {all} threads.\n", cpu_model());
-    let _ = writeln!(md, "Throughput in Mrays/s (best of {PASSES} passes after an untimed one, the contenders' passes alternating; brute: one pass on a 1/32 subset). Threads: {threads_said}. Build: best of {BUILD_REPS} builds on {all} threads.\n");
+    let _ = writeln!(md, "Throughput in Mrays/s (best of {} passes after an untimed one, the contenders' passes alternating; brute: one pass on a 1/32 subset). Threads: {threads_said}. Build: best of {BUILD_REPS} builds on {all} threads.\n", args.passes);
     let _ = write!(md, "| scene | prims | backend | build ms | MiB | B/prim |");
     for rays in ["camera", "shadow", "random"] {
         for t in &thread_counts {
@@ -540,7 +550,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let mut cells: Vec<Vec<f64>> = vec![Vec::new(); built.len()];
         for (label, rays, rk) in [("camera", &cam, RayKind::Camera), ("shadow", sh, RayKind::Shadow), ("random", &rnd, RayKind::Random)] {
             for &t in &thread_counts {
-                let mut speeds = throughputs(&timed, rays, rk, t, PASSES).into_iter();
+                let mut speeds = throughputs(&timed, rays, rk, t, args.passes).into_iter();
                 for (i, (kind, b)) in built.iter().enumerate() {
                     // Brute force: one pass over every 32nd ray.
                     let m = if *kind == brute {
@@ -563,7 +573,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let best_build = build_times.get(&kind).copied().unwrap_or(built[i].1.build_seconds);
             if let Some((nodes, leaves)) = a.sah_cost() {
                 let total = nodes + leaves;
-                let embree = if backends.contains(&BackendKind::Embree) { embree_sah(name) } else { None };
+                let embree = if backends.contains(&BackendKind::Embree) && !args.throughput_only { embree_sah(name) } else { None };
                 let (e, r) = embree.map_or(("–".to_string(), "–".to_string()), |e| (format!("{e:.3}"), format!("{:.3}", total / e)));
                 let _ = writeln!(sah_rows, "| {} | {} | {:.3} | {:.3} | {:.3} | {e} | {r} |", scene.name, kind, nodes, leaves, total);
             }
@@ -582,10 +592,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         }
         drop(built);
         #[cfg(has_embree)]
-        if backends.contains(&BackendKind::Embree) {
+        if backends.contains(&BackendKind::Embree) && !args.throughput_only {
             embree_modes(&scene, &cam, &rnd, &shadow, &mut mode_rows)?;
         }
-        if !args.no_render && !scene.source.starts_with("<generated") {
+        if !no_render && !scene.source.starts_with("<generated") {
             let mut times = Vec::new();
             for kind in [BackendKind::Native, BackendKind::Brute] {
                 let built = accel::build(kind, &scene.shapes, all)?;
@@ -644,7 +654,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|---:|");
         md.push_str(&render_rows);
     }
-    if !args.no_render {
+    if !no_render {
         let backends: Vec<BackendKind> = backends.iter().copied().filter(|b| *b != BackendKind::Brute).collect();
         let _ = writeln!(
             md,
