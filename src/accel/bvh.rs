@@ -10,6 +10,9 @@ use crate::geometry::Aabb;
 use glam::Vec4;
 use rayon::prelude::*;
 
+mod partition;
+use partition::partition;
+
 /// At most this many primitives per leaf; below it the SAH decides.
 pub(super) const MAX_LEAF: usize = 8;
 /// Bins per axis: few for small nodes, where filling and sweeping the bins
@@ -207,7 +210,7 @@ impl<'a> BuildSet<'a> {
         let sides = match split {
             Some((axis, bin, bins)) => {
                 let left_of = Binning::new(&cbounds, bins).left_of(axis, bin);
-                let (m, left, right) = partition(refs, |r| left_of.test(r.centroid2()));
+                let (m, (left, right)) = partition(refs, |r| left_of.test(r.centroid2()));
                 if m == 0 || m == n {
                     None
                 } else {
@@ -409,32 +412,6 @@ fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4
     match best {
         Some((_, _, cost)) if n <= MAX_LEAF && cost >= blocks(n) => None,
         other => other.map(|(axis, bin, _)| (axis, bin, N)),
-    }
-}
-
-/// In-place partition: the refs for which `pred` holds first. Returns their
-/// number and the (primitive, centroid) bounds of both sides, gathered in the
-/// same pass so the children need not scan their refs again.
-fn partition<F: Fn(&PrimRef) -> bool>(v: &mut [PrimRef], pred: F) -> (usize, (Box4, Box4), (Box4, Box4)) {
-    let (mut lb, mut lc, mut rb, mut rc) = (Box4::EMPTY, Box4::EMPTY, Box4::EMPTY, Box4::EMPTY);
-    let (mut i, mut j) = (0, v.len());
-    loop {
-        while i < j && pred(&v[i]) {
-            lb = lb.union(Box4::of(&v[i]));
-            lc.grow(v[i].centroid2());
-            i += 1;
-        }
-        while i < j && !pred(&v[j - 1]) {
-            rb = rb.union(Box4::of(&v[j - 1]));
-            rc.grow(v[j - 1].centroid2());
-            j -= 1;
-        }
-        if i >= j {
-            return (i, (lb, lc), (rb, rc));
-        }
-        // v[i] belongs right and v[j-1] left: swap, and the scans above
-        // take them on the next round.
-        v.swap(i, j - 1);
     }
 }
 
