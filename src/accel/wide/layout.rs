@@ -378,9 +378,12 @@ fn write_leaves<const W: usize>(
             groups[g].write(tg);
             g += 1;
         }
-        for q in run.iter().map(|x| prims.get(x.index())).filter(|q| q.is_sphere()) {
-            spheres[s].write(q);
-            s += 1;
+        // Most leaves hold triangles only: no second fetch of their primitives.
+        if leaf.spheres() > 0 {
+            for q in run.iter().map(|x| prims.get(x.index())).filter(|q| q.is_sphere()) {
+                spheres[s].write(q);
+                s += 1;
+            }
         }
         codes.push(if leaf.inline() {
             LEAF_BIT | INLINE_BIT | leaf.groups() << 28 | group
