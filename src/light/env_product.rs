@@ -31,6 +31,9 @@ const TILES_X: usize = 64;
 const TILES_Y: usize = 32;
 const BINS_T: usize = 16;
 const BINS_P: usize = 32;
+/// Intervals of u per normal bin in the tile search's guide table (a power
+/// of two, so that j / GUIDE is exact).
+const GUIDE: usize = 256;
 /// Angular slack (radians) added to every cone radius, for the rounding of
 /// f32 directions.
 pub(super) const SLACK: f64 = 1e-3;
@@ -48,6 +51,12 @@ pub struct EnvProduct {
     bound: Vec<f32>,
     cdf: Vec<f64>,
     z: Vec<f64>,
+    /// Per normal bin, `GUIDE` + 1 entries: guide[j] = how many of the
+    /// bin's cdf entries are ≤ j / GUIDE. A sample's u lies between two
+    /// of them, so its search runs over the few entries between (most
+    /// often one cache line) instead of over the bin's 2049 (16 KiB; 11
+    /// dependent loads per sample, from 8 MiB of tables).
+    guide: Vec<u16>,
     /// Per tile, the running share of its patch rows in the tile's mass
     /// (its rows + 1 entries, from `row_cdf_at[tile]`): a sample picks its
     /// row here, where summing the rows' masses cost two scattered
@@ -164,7 +173,13 @@ impl EnvProduct {
             }
         }
         row_cdf_at.push(row_cdf.len());
-        EnvProduct { col_start, row_start, tile_col, tile_row, bound, cdf, z, row_cdf, row_cdf_at, share, cones }
+        assert!(tiles < u16::MAX as usize, "guide entries are u16");
+        let mut guide = Vec::with_capacity(bins * (GUIDE + 1));
+        for b in 0..bins {
+            let c = &cdf[b * (tiles + 1)..(b + 1) * (tiles + 1)];
+            guide.extend((0..=GUIDE).map(|j| c.partition_point(|&v| v <= j as f64 / GUIDE as f64) as u16));
+        }
+        EnvProduct { col_start, row_start, tile_col, tile_row, bound, cdf, z, guide, row_cdf, row_cdf_at, share, cones }
     }
 
     fn tiles(&self) -> usize {
@@ -203,7 +218,7 @@ impl EnvProduct {
         // the row from u.0; the leftovers place the point in the patch.
         let cdf = &self.cdf[b * (tiles + 1)..(b + 1) * (tiles + 1)];
         let u1 = u.1 as f64;
-        let k = (cdf.partition_point(|&c| c <= u1) - 1).min(tiles - 1);
+        let k = (self.count_at_most(b, cdf, u1) - 1).min(tiles - 1);
         let (k0, k1) = (cdf[k], cdf[k + 1]);
         if !(k1 > k0) {
             return None;
@@ -239,6 +254,21 @@ impl EnvProduct {
         let u_left = if l1 > l0 { ((u0 - l0) / (l1 - l0)).clamp(0.0, 1.0) } else { 0.5 };
         let (dir, radiance, pdf) = env.sample_in_patch(p, q, u_left, v_left)?;
         Some((dir, radiance, pdf, p, q))
+    }
+
+    /// How many entries of bin `b`'s `cdf` are ≤ u (u ≥ 0): the entries
+    /// below guide[j] are ≤ j / GUIDE ≤ u and those from guide[j + 1] on
+    /// exceed (j + 1) / GUIDE > u, so only the ones between are searched.
+    /// The same count as a search of the whole table.
+    fn count_at_most(&self, b: usize, cdf: &[f64], u: f64) -> usize {
+        let j = ((u * GUIDE as f64) as usize).min(GUIDE - 1);
+        let g = &self.guide[b * (GUIDE + 1)..];
+        let (lo, hi) = (g[j] as usize, g[j + 1] as usize);
+        if u >= 1.0 {
+            // Past the guide's last interval: everything up to the end may be ≤ u.
+            return lo + cdf[lo..].partition_point(|&c| c <= u);
+        }
+        lo + cdf[lo..hi].partition_point(|&c| c <= u)
     }
 
     /// The tile of patch (p, q).
@@ -280,6 +310,30 @@ pub(super) mod tests {
     /// The bound really bounds: every direction above a normal's horizon
     /// (where the map is lit) has a positive pdf, so nothing the integrand
     /// sees is missed; and a sample's pdf is the pdf of its direction.
+    /// The guided tile search counts what a search of the whole table
+    /// counts: at random u, at the guide's own boundaries j / GUIDE and
+    /// just below them, and at every cdf value (flat runs of equal values
+    /// are where the tiles below a bin's horizon are).
+    #[test]
+    fn guided_search_matches_the_whole_search() {
+        let env = map();
+        let pr = env.product.as_ref().unwrap();
+        let tiles = pr.tiles();
+        let mut rng = Rng::new(9, 9);
+        let mut checked = 0;
+        for b in 0..BINS_T * BINS_P {
+            let cdf = &pr.cdf[b * (tiles + 1)..(b + 1) * (tiles + 1)];
+            let mut us: Vec<f64> = (0..64).map(|_| rng.uniform() as f64).collect();
+            us.extend((0..GUIDE).flat_map(|j| [j as f64 / GUIDE as f64, (j as f64 / GUIDE as f64 - 1e-12).max(0.0)]));
+            us.extend(cdf.iter().copied());
+            for u in us {
+                assert_eq!(pr.count_at_most(b, cdf, u), cdf.partition_point(|&c| c <= u), "bin {b}, u {u}");
+                checked += 1;
+            }
+        }
+        assert!(checked > 100_000);
+    }
+
     #[test]
     fn product_pdf_covers_the_upper_hemisphere_and_matches_sampling() {
         let env = map();

@@ -60,8 +60,6 @@ pub struct EnvMap {
     pub(super) col_cdf: Vec<f64>,
     /// Probability of each patch ((h + 1) × w, row-major).
     pub(super) prob: Vec<f64>,
-    /// Luminance of each texel (the corners of the patches).
-    lum: Vec<f64>,
     /// The map × cosine-bound tables (`env_product`).
     pub product: Option<EnvProduct>,
     /// The glossy-lobe tables over the product's tiles (`env_lobe`).
@@ -94,8 +92,7 @@ impl EnvMap {
 
     pub fn from_texels(path: String, width: usize, height: usize, texels: Vec<Vec3>) -> EnvMap {
         let (w, h) = (width, height);
-        let lum: Vec<f64> = texels.iter().map(|&t| illuminance(t.max(Vec3::ZERO)) as f64).collect();
-        let mut map = EnvMap { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)], lum, product: None, lobe: None };
+        let mut map = EnvMap { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)], product: None, lobe: None };
         let mut weight = vec![0.0f64; w * (h + 1)];
         for q in 0..=h {
             let (y0, y1) = map.patch_rows(q);
@@ -139,11 +136,15 @@ impl EnvMap {
     /// The corner luminances [top-left, top-right, bottom-left, bottom-right]
     /// of patch (p, q): texel columns p and p + 1 (wrapping), rows q − 1 and
     /// q (clamped, as the lookup is).
+    /// Computed from the texels, which `sample_in_patch`'s lookup reads
+    /// next anyway: a table of the luminances cost a second pair of cache
+    /// misses per sample (the tables of a 1024 × 512 map are about 30 MB).
     fn corners(&self, p: usize, q: usize) -> [f64; 4] {
         let (w, h) = (self.width, self.height);
         let (top, bottom) = (q.saturating_sub(1), q.min(h - 1));
-        let (l, r) = (p, (p + 1) % w);
-        [self.lum[top * w + l], self.lum[top * w + r], self.lum[bottom * w + l], self.lum[bottom * w + r]]
+        let (l, r) = (p, if p + 1 == w { 0 } else { p + 1 });
+        let lum = |i: usize| illuminance(self.texels[i].max(Vec3::ZERO)) as f64;
+        [lum(top * w + l), lum(top * w + r), lum(bottom * w + l), lum(bottom * w + r)]
     }
 
     /// The patch holding texel coordinates (x, y), and (x, y) in it as (s, t) ∈ [0, 1]².
@@ -176,7 +177,15 @@ impl EnvMap {
 
     fn texel(&self, i: i64, j: i64) -> Vec3 {
         let (w, h) = (self.width as i64, self.height as i64);
-        self.texels[(j.clamp(0, h - 1) * w + i.rem_euclid(w)) as usize]
+        // The lookup's columns are -1..=w: wrap those without a division.
+        let i = if i < 0 && i >= -w {
+            i + w
+        } else if i >= w && i < 2 * w {
+            i - w
+        } else {
+            i.rem_euclid(w)
+        };
+        self.texels[(j.clamp(0, h - 1) * w + i) as usize]
     }
 
     /// Radiance arriving from direction `d` (unit, pointing away from the
