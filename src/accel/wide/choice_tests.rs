@@ -52,9 +52,11 @@ fn cold_lines_estimate_matches_the_exact_sum() {
 
 /// Occlusion answers do not depend on the any-hit child order, ray by ray
 /// and in packets; and the per-batch choice (`any_order`) follows the
-/// counted work: nearest first among grass blades, whose occluders stand
-/// next to the rays' origins, farthest first in the architecture scene,
-/// whose occluders are floor slabs far along the rays.
+/// counted work: nearest first among dense grass blades, whose occluders
+/// stand next to the rays' origins (grass:500k; in grass:50k nearest first
+/// saves only 7 % of the visits, inside `ORDER_MARGIN`, and no time),
+/// farthest first in the architecture scene, whose occluders are floor
+/// slabs far along the rays.
 #[test]
 fn both_any_hit_orders_answer_alike_and_the_choice_follows_the_work() {
     let shapes = shapes();
@@ -86,7 +88,7 @@ fn both_any_hit_orders_answer_alike_and_the_choice_follows_the_work() {
             assert_eq!(unsafe { packets(&bvh, &packed, order) }, want, "{order:?}, packets");
         }
     }
-    for (spec, expect) in [("grass:50k", ChildOrder::NearestFirst), ("arch:100k", ChildOrder::FarthestFirst)] {
+    for (spec, expect) in [("grass:500k", ChildOrder::NearestFirst), ("arch:100k", ChildOrder::FarthestFirst)] {
         let scene = crate::bench::load_bench_scene(spec).unwrap();
         let bvh = WideBvh::<8>::build(&scene.shapes);
         let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
