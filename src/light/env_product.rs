@@ -307,9 +307,6 @@ pub(super) mod tests {
         Vec3::new(r * phi.cos(), z, r * phi.sin())
     }
 
-    /// The bound really bounds: every direction above a normal's horizon
-    /// (where the map is lit) has a positive pdf, so nothing the integrand
-    /// sees is missed; and a sample's pdf is the pdf of its direction.
     /// The guided tile search counts what a search of the whole table
     /// counts: at random u, at the guide's own boundaries j / GUIDE and
     /// just below them, and at every cdf value (flat runs of equal values
@@ -334,6 +331,9 @@ pub(super) mod tests {
         assert!(checked > 100_000);
     }
 
+    /// The bound really bounds: every direction above a normal's horizon
+    /// (where the map is lit) has a positive pdf, so nothing the integrand
+    /// sees is missed; and a sample's pdf is the pdf of its direction.
     #[test]
     fn product_pdf_covers_the_upper_hemisphere_and_matches_sampling() {
         let env = map();
