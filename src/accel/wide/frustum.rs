@@ -276,7 +276,9 @@ impl<const W: usize> WideBvh<W> {
         }
         let mut active: u64 = (1u64 << n) - 1;
         let mut far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
-        let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
+        // A cache-aligned frame (`CacheAligned`).
+        let mut stack = super::CacheAligned([MaybeUninit::<(u32, f32)>::uninit(); STACK]);
+        let stack = &mut stack.0;
         let mut sp = 0;
         let mut cur = self.root;
         let (mut wasted, mut useful) = (0u32, 0u32);
@@ -319,7 +321,7 @@ impl<const W: usize> WideBvh<W> {
             }
             if mask & leaves != 0 {
                 // Start fetching the leaves while the rays test the node.
-                let mut m = mask & leaves;
+                let mut m = if self.prefetch_packets { mask & leaves } else { 0 };
                 while m != 0 {
                     self.prefetch(node.child[m.trailing_zeros() as usize]);
                     m &= m - 1;
@@ -432,11 +434,11 @@ impl<const W: usize> WideBvh<W> {
                 // `order`: nearest first for the closest hit, the batch's
                 // choice for any hit (`any_order`); a packet stops only
                 // once every ray is occluded.
-                sp = self.push_children(node, inner, &near, &mut stack, sp, order);
+                sp = self.push_children(node, inner, &near, stack, sp, order);
             }
             // Pop the nearest child that may still hold a closer hit (the
             // leaves just tested may have shortened the rays).
-            match super::pop_within(&stack, &mut sp, far) {
+            match super::pop_within(stack, &mut sp, far) {
                 Some(code) => cur = code,
                 None => return,
             }

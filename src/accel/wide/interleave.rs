@@ -43,7 +43,9 @@ pub(super) const COLD_LINES: f64 = 3.0;
 /// rays on the 1M-triangle mesh.
 const IN_FLIGHT: usize = 4;
 
-/// One ray's traversal state between steps.
+/// One ray's traversal state between steps; cache-aligned, which also
+/// aligns the frame of the function holding the walkers (`CacheAligned`).
+#[repr(align(64))]
 struct Walker {
     /// Index of the ray in the batch.
     ray: usize,

@@ -72,7 +72,9 @@ impl<const W: usize> WideBvh<W> {
         // One axis permutation for all rays: leaves as in `frustum_packet`.
         let shared_axes = soa.shared_axes();
         // Stack of (node, the rays that entered it, their nearest entry).
-        let mut stack = [MaybeUninit::<(u32, u32, f32)>::uninit(); STACK];
+        // A cache-aligned frame (`CacheAligned`).
+        let mut stack = super::CacheAligned([MaybeUninit::<(u32, u32, f32)>::uninit(); STACK]);
+        let stack = &mut stack.0;
         let mut sp = 0;
         let (mut code, mut entered) = (self.root, active);
         let inf = _mm256_set1_ps(f32::INFINITY);
@@ -103,7 +105,9 @@ impl<const W: usize> WideBvh<W> {
                     continue;
                 }
                 if child & LEAF_BIT == 0 {
-                    self.prefetch(child);
+                    if self.prefetch_packets {
+                        self.prefetch(child);
+                    }
                     stack[sp].write((child, r, child_near[lane]));
                     sp += 1;
                     continue;

@@ -131,6 +131,9 @@ pub struct WideBvh<const W: usize> {
     /// Trace incoherent batches several rays at a time (`interleave`): the
     /// structure is too large for the caches, so traversal waits on memory.
     interleave: bool,
+    /// Packets prefetch the leaves (and masked packets the nodes) they are
+    /// about to enter (`PACKET_PREFETCH_BYTES`).
+    prefetch_packets: bool,
     /// The any-hit child order last chosen (`any_order`): 0 none yet, 1
     /// farthest first, 2 nearest first; and the batches that asked.
     any_order: std::sync::atomic::AtomicU8,
@@ -151,6 +154,30 @@ fn avx_available() -> bool {
         false
     }
 }
+
+/// A traversal's stack frame holder: a local of this type makes the
+/// function realign its stack frame to a cache line, so where the compiler
+/// spills the ray's broadcast slab vectors (32-byte AVX loads on every node
+/// visit) does not depend on the callers' frames. Without it, the same
+/// machine code ran random rays 20 % slower in one build than in another
+/// (CBbunny 12.5 against 15.5 Mrays/s, 1 thread): its spills straddled
+/// cache lines.
+#[repr(C, align(64))]
+pub(super) struct CacheAligned<T>(pub(super) T);
+
+/// Structures at least this large have packets prefetch what they enter;
+/// smaller ones stay in the caches, where the prefetches only cost issue
+/// slots and fill buffers. Measured (1 thread, Mrays/s, camera / shadow,
+/// prefetching against none, the same binary): on a 16-core Xeon
+/// (Emerald Rapids) CBbunny (1.8 MiB) 32.8-33.1 / 16.5-16.8 against 34.2 /
+/// 17.5, beetle 42.4-43.9 / 11.7 against 45.0 / 12.3, maxplanck (3.5 MiB)
+/// 22.0-22.4 / 6.0-6.1 against 23.3 / 5.9; on this project's EPYC within
+/// 2 % either way. But the 1M-triangle sphere (65 MiB) 18.1-18.7 / 3.5
+/// against 14.7 / 2.6 and subdivided bunny (121 MiB) 18.5-18.9 / 3.3-3.5
+/// against 16.8 / 3.1 need them. Single rays keep prefetching everywhere:
+/// on small trees it is worth 3-6 % of random rays on the EPYC and on the
+/// Xeon's maxplanck (CBbunny there: 3 % the other way).
+const PACKET_PREFETCH_BYTES: usize = 16 << 20;
 
 /// Whether to run the AVX-512 packet kernels: only when asked for with
 /// `PATHTRACER_NATIVE_ISA=avx512` and the CPU has AVX-512F. Not the
@@ -184,8 +211,9 @@ impl<const W: usize> WideBvh<W> {
             let code = part.build(set, &prims);
             (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, &prims);
         }
-        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), avx512: W == 8 && avx512_requested(), interleave: false, any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
+        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), avx512: W == 8 && avx512_requested(), interleave: false, prefetch_packets: false, any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
         b.interleave = b.avx && b.interleave_pays();
+        b.prefetch_packets = b.memory_bytes() >= PACKET_PREFETCH_BYTES;
         b
     }
 
@@ -245,7 +273,8 @@ impl<const W: usize> WideBvh<W> {
         let mut tmax = ray.tmax;
         // Stack of (child code, entry distance), not initialised: only
         // entries below `sp` are read.
-        let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
+        let mut stack = CacheAligned([MaybeUninit::<(u32, f32)>::uninit(); STACK]);
+        let stack = &mut stack.0;
         let mut sp = 0;
         let mut cur = self.root;
         loop {
@@ -274,7 +303,7 @@ impl<const W: usize> WideBvh<W> {
                     }
                     // Push every entered child (the one `order` visits
                     // next on top), and continue with the top one.
-                    sp = self.push_children(node, mask, &near, &mut stack, sp, order);
+                    sp = self.push_children(node, mask, &near, stack, sp, order);
                     sp -= 1;
                     // SAFETY: push_children wrote the entry at the old top.
                     cur = unsafe { stack[sp].assume_init() }.0;
@@ -282,7 +311,7 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             // Pop, skipping subtrees that start beyond the current closest hit.
-            match pop_within(&stack, &mut sp, tmax) {
+            match pop_within(stack, &mut sp, tmax) {
                 Some(code) => cur = code,
                 None => return,
             }

@@ -282,7 +282,9 @@ impl<const W: usize> WideBvh<W> {
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut shears: [MaybeUninit<super::Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut setup: u64 = 0;
-        let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
+        // A cache-aligned frame (`CacheAligned`).
+        let mut stack = super::CacheAligned([MaybeUninit::<(u32, f32)>::uninit(); STACK]);
+        let stack = &mut stack.0;
         let mut sp = 0;
         let mut cur = self.root;
         let (mut wasted, mut useful) = (0u32, 0u32);
@@ -308,7 +310,7 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             let mut todo = mask & leaves;
-            let mut m = todo;
+            let mut m = if self.prefetch_packets { todo } else { 0 };
             while m != 0 {
                 self.prefetch(node.child[m.trailing_zeros() as usize]);
                 m &= m - 1;
@@ -341,7 +343,7 @@ impl<const W: usize> WideBvh<W> {
             }
             let inner = mask & !leaves;
             if inner != 0 {
-                sp = self.push_children(node, inner, &near, &mut stack, sp, order);
+                sp = self.push_children(node, inner, &near, stack, sp, order);
             }
             if sp == 0 {
                 return;
