@@ -427,6 +427,22 @@ fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4
 mod tests {
     use super::*;
 
+    /// Sets of up to `LEAF_ALWAYS` primitives are leaves even where the SAH
+    /// would split them (two tiny pairs far apart: the split costs about
+    /// 0.5 block tests against the leaf's 1); one more primitive and the
+    /// SAH splits.
+    #[test]
+    fn sets_of_one_block_are_leaves_without_an_sah_test() {
+        let tiny = |x: f32| Aabb { min: glam::Vec3::new(x, 0.0, 0.0), max: glam::Vec3::new(x + 0.01, 0.01, 0.01) };
+        let at = [0.0, 0.02, 100.0, 100.02, 0.04];
+        let refs_of = |n: usize| -> Vec<PrimRef> { (0..n).map(|i| PrimRef::new(&tiny(at[i]), i as u32)).collect() };
+        let mut four = refs_of(LEAF_ALWAYS);
+        assert!(BuildSet::root(&mut four).unwrap().split().is_err(), "{LEAF_ALWAYS} primitives must make a leaf");
+        let mut five = refs_of(LEAF_ALWAYS + 1);
+        let (l, r) = BuildSet::root(&mut five).unwrap().split().ok().expect("five far-apart primitives must split");
+        assert_eq!((l.len(), r.len()), (3, 2));
+    }
+
     /// Indices survive the split encoding up to the largest `u32`, and the
     /// `w` lanes holding them are normal floats (no denormal slow path).
     #[test]
