@@ -321,11 +321,7 @@ impl<const W: usize> WideBvh<W> {
             }
             if mask & leaves != 0 {
                 // Start fetching the leaves while the rays test the node.
-                let mut m = if self.prefetch_packets { mask & leaves } else { 0 };
-                while m != 0 {
-                    self.prefetch(node.child[m.trailing_zeros() as usize]);
-                    m &= m - 1;
-                }
+                self.prefetch_for_packet(node, mask & leaves);
                 // Leaf by leaf, the rays that enter it (tested 8 at a time,
                 // the single-ray slab test's operations lane by lane).
                 let mut todo = mask & leaves;

@@ -105,9 +105,7 @@ impl<const W: usize> WideBvh<W> {
                     continue;
                 }
                 if child & LEAF_BIT == 0 {
-                    if self.prefetch_packets {
-                        self.prefetch(child);
-                    }
+                    self.prefetch_for_packet(node, 1 << lane);
                     stack[sp].write((child, r, child_near[lane]));
                     sp += 1;
                     continue;

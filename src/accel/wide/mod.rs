@@ -340,6 +340,21 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
+    /// `prefetch` of the children of `node` in `mask`, for a packet about to
+    /// enter them: only in trees large enough to miss the caches
+    /// (`PACKET_PREFETCH_BYTES`).
+    #[inline(always)]
+    fn prefetch_for_packet(&self, node: &Node<W>, mask: u32) {
+        if !self.prefetch_packets {
+            return;
+        }
+        let mut m = mask;
+        while m != 0 {
+            self.prefetch(node.child[m.trailing_zeros() as usize]);
+            m &= m - 1;
+        }
+    }
+
     /// Push the children of `node` in `mask` with their entry distances,
     /// starting their fetches, the one to visit next on top as `order`
     /// says. Returns the new stack height.

@@ -310,11 +310,7 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             let mut todo = mask & leaves;
-            let mut m = if self.prefetch_packets { todo } else { 0 };
-            while m != 0 {
-                self.prefetch(node.child[m.trailing_zeros() as usize]);
-                m &= m - 1;
-            }
+            self.prefetch_for_packet(node, todo);
             while todo != 0 {
                 let lane = todo.trailing_zeros() as usize;
                 todo &= todo - 1;
