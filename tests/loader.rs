@@ -81,11 +81,8 @@ fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_pathtracer")
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pathtracer-loader-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn scratch(name: &str) -> common::Scratch {
+    common::Scratch::new("loader", name)
 }
 
 /// Run the CLI on `scene` and expect a clean one-line failure naming `scene`

@@ -3,14 +3,13 @@
 //! sample and tile splits, with and without adaptive sampling; bad sets and
 //! bad flags are refused with one line and leave no output.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::process::{Command, Output};
 
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pathtracer-split-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn scratch(name: &str) -> common::Scratch {
+    common::Scratch::new("split", name)
 }
 
 fn pathtracer(dir: &Path, args: &[&str]) -> Output {
