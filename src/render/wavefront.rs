@@ -84,30 +84,29 @@ impl<'a> PathTracer<'a> {
     pub(super) fn wavefront(&self, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
         let m = self.max_depth;
         let counts = |bounce: u32| self.accumulate || bounce == m;
-        let mut paths: Vec<Path> = rays
-            .iter()
-            .zip(hits)
-            .map(|(ray, hit)| {
-                let wo = -ray.dir.normalize();
-                let mut p = Path { l: Vec3::ZERO, beta: Vec3::ONE, radiance_scale: 1.0, v: None, bounce: 1, terms: 0..0, counted: false, next: None };
-                match hit.map(|h| Interaction::with_barycentrics(self.scene, ray, &h, self.accel.exact_barycentrics())) {
-                    None => {
-                        if counts(0) {
-                            p.l = self.lights.escaped(-wo);
-                        }
-                    }
-                    Some(it) => {
-                        if counts(0) {
-                            p.l = emitted(self.scene, &it, wo);
-                        }
-                        if m > 0 {
-                            p.v = Some(self.vertex(it, wo));
-                        }
+        // Each path is pushed empty and its first vertex made in place
+        // (`vertex_in`): a path built by value and collected was copied.
+        let mut paths: Vec<Path> = Vec::with_capacity(rays.len());
+        for (ray, hit) in rays.iter().zip(hits) {
+            let wo = -ray.dir.normalize();
+            paths.push(Path { l: Vec3::ZERO, beta: Vec3::ONE, radiance_scale: 1.0, v: None, bounce: 1, terms: 0..0, counted: false, next: None });
+            let p = paths.last_mut().expect("just pushed");
+            match hit.map(|h| Interaction::with_barycentrics(self.scene, ray, &h, self.accel.exact_barycentrics())) {
+                None => {
+                    if counts(0) {
+                        p.l = self.lights.escaped(-wo);
                     }
                 }
-                p
-            })
-            .collect();
+                Some(it) => {
+                    if counts(0) {
+                        p.l = emitted(self.scene, &it, wo);
+                    }
+                    if m > 0 {
+                        self.vertex_in(it, wo, &mut p.v);
+                    }
+                }
+            }
+        }
         // Sized for a bounce's worst case up front (every path drawing every
         // light sample, and with -H its hemisphere samples): grown on demand,
         // these were 4000 reallocations per CBempty render, 1 % of its work.
@@ -117,6 +116,7 @@ impl<'a> PathTracer<'a> {
         let (mut shadow, mut closest): (Vec<Ray>, Vec<Ray>) = (Vec::with_capacity(n * per_light), Vec::with_capacity(n * (1 + hemi)));
         let (mut occluded, mut found): (Vec<bool>, Vec<Option<Hit>>) = (Vec::with_capacity(n * per_light), Vec::with_capacity(n * (1 + hemi)));
         let mut terms: Vec<Term> = Vec::with_capacity(n * (per_light + self.lights.lights.len() + hemi + 1));
+        let mut guide_slot = None;
         loop {
             shadow.clear();
             closest.clear();
@@ -132,10 +132,10 @@ impl<'a> PathTracer<'a> {
                 p.counted = counts(p.bounce);
                 // Found once for the light samples' MIS weights and the
                 // continuation that draws from it.
-                let guide = self.guide_at(v, p.bounce);
-                let seeks_light = p.counted && self.direct_terms(v, p.bounce, guide.as_ref(), sampler, &mut terms, &mut shadow, &mut closest);
+                let guide = self.guide_at(v, p.bounce, &mut guide_slot);
+                let seeks_light = p.counted && self.direct_terms(v, p.bounce, guide, sampler, &mut terms, &mut shadow, &mut closest);
                 p.terms = first..terms.len();
-                p.next = self.continuation(v, p.bounce, guide.as_ref(), seeks_light, p.beta, p.radiance_scale, sampler).map(|c| {
+                p.next = self.continuation(v, p.bounce, guide, seeks_light, p.beta, p.radiance_scale, sampler).map(|c| {
                     closest.push(v.it.spawn_ray(c.wi));
                     (closest.len() - 1, c)
                 });
@@ -178,7 +178,7 @@ impl<'a> PathTracer<'a> {
                 });
                 match next {
                     Some((next, c)) => {
-                        p.v = Some(self.vertex(next, -c.wi));
+                        self.vertex_in(next, -c.wi, &mut p.v);
                         p.beta = c.beta;
                         p.radiance_scale = c.radiance_scale;
                         p.bounce += 1;
@@ -396,12 +396,14 @@ impl<'a> PathTracer<'a> {
     /// (`light::specular_guide`), where its continuation is drawn from the
     /// guided mixture: not at the path's last vertex, not with `-H`, and
     /// only with a target in view.
-    pub(super) fn guide_at(&self, v: &Vertex, bounce: u32) -> Option<GuideAt<'a>> {
+    /// Made in `slot`, which the caller keeps from vertex to vertex
+    /// (`SpecularGuide::at_in`).
+    pub(super) fn guide_at<'b>(&self, v: &Vertex, bounce: u32, slot: &'b mut Option<GuideAt<'a>>) -> Option<&'b GuideAt<'a>> {
         if !matches!(v.bsdf, Some(Bsdf::Diffuse(_))) || self.hemisphere || bounce == self.max_depth {
             return None;
         }
         let lights: &'a crate::light::Lights = self.lights;
-        let at = lights.guide.as_ref()?.at(v.it.p, v.ns);
+        let at = lights.guide.as_ref()?.at_in(v.it.p, v.ns, slot);
         (at.fraction() > 0.0).then_some(at)
     }
 
