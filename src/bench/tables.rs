@@ -147,3 +147,24 @@ mod tests {
         assert_eq!(row, "| arch | – | – | 0.50 | 0.50 | – | – |");
     }
 }
+
+/// native's 1-thread Mrays/s ÷ `best` (per scene and ray kind: Embree's
+/// fastest batch call, `embree_modes`), as a table.
+pub(super) fn best_call_table(samples: &[Sample], best: &[(String, &'static str, f64)]) -> String {
+    let mut out = String::from("| scene | camera 1T | shadow 1T | random 1T |\n|---|---:|---:|---:|\n");
+    for sc in in_order(best.iter().map(|b| b.0.as_str())) {
+        let mut row = format!("| {sc} |");
+        for rays in ["camera", "shadow", "random"] {
+            let native = samples.iter().find(|s| s.scene == sc && s.rays == rays && s.threads == 1 && s.backend == Contender::Backend(BackendKind::Native)).map(|s| s.mrays_per_s);
+            let e = best.iter().find(|b| b.0 == sc && b.1 == rays).map(|b| b.2);
+            match (native, e) {
+                (Some(n), Some(e)) if e > 0.0 => {
+                    let _ = write!(row, " {:.2} |", n / e);
+                }
+                _ => row.push_str(" – |"),
+            }
+        }
+        let _ = writeln!(out, "{row}");
+    }
+    out
+}
