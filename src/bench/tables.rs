@@ -16,13 +16,36 @@ pub struct Sample {
     pub mrays_per_s: f64,
 }
 
+/// The measured Mrays/s of `backend` on `scene`'s `rays` at `threads`.
+fn mrays(samples: &[Sample], scene: &str, rays: &str, threads: usize, backend: Contender) -> Option<f64> {
+    samples.iter().find(|s| s.scene == scene && s.rays == rays && s.threads == threads && s.backend == backend).map(|s| s.mrays_per_s)
+}
+
+/// native's 1-thread Mrays/s ÷ `best` (per scene and ray kind: Embree's
+/// fastest batch call, `embree_modes`), as a table.
+pub(super) fn best_call_table(samples: &[Sample], best: &[(String, &'static str, f64)]) -> String {
+    let mut out = String::from("| scene | camera 1T | shadow 1T | random 1T |\n|---|---:|---:|---:|\n");
+    for sc in in_order(best.iter().map(|b| b.0.as_str())) {
+        let mut row = format!("| {sc} |");
+        for rays in ["camera", "shadow", "random"] {
+            let native = mrays(samples, sc, rays, 1, Contender::Backend(BackendKind::Native));
+            let e = best.iter().find(|b| b.0 == sc && b.1 == rays).map(|b| b.2);
+            match (native, e) {
+                (Some(n), Some(e)) if e > 0.0 => {
+                    let _ = write!(row, " {:.2} |", n / e);
+                }
+                _ => row.push_str(" – |"),
+            }
+        }
+        let _ = writeln!(out, "{row}");
+    }
+    out
+}
+
 /// native ÷ `other` throughput per scene, ray kind and thread count.
 pub(super) fn ratio_table(samples: &[Sample], threads: &[usize], other: Contender) -> String {
     let mut out = String::new();
     let scenes = in_order(samples.iter().map(|s| s.scene.as_str()));
-    let find = |sc: &str, rays: &str, t: usize, b: Contender| {
-        samples.iter().find(|s| s.scene == sc && s.rays == rays && s.threads == t && s.backend == b).map(|s| s.mrays_per_s)
-    };
     let mut header = String::from("| scene |");
     let mut rule = String::from("|---|");
     for rays in ["camera", "shadow", "random"] {
@@ -37,7 +60,7 @@ pub(super) fn ratio_table(samples: &[Sample], threads: &[usize], other: Contende
         let mut any = false;
         for rays in ["camera", "shadow", "random"] {
             for &t in threads {
-                match (find(sc, rays, t, Contender::Backend(BackendKind::Native)), find(sc, rays, t, other)) {
+                match (mrays(samples, sc, rays, t, Contender::Backend(BackendKind::Native)), mrays(samples, sc, rays, t, other)) {
                     (Some(n), Some(e)) => {
                         any = true;
                         let _ = write!(row, " {:.2} |", n / e);
@@ -77,7 +100,7 @@ pub(super) fn scaling_table(samples: &[Sample], threads: &[usize]) -> String {
         let contenders = in_order(samples.iter().filter(|s| s.scene == sc && s.backend != brute).map(|s| s.backend));
         for b in contenders {
             for rays in ["camera", "shadow", "random"] {
-                let at = |t: usize| samples.iter().find(|s| s.scene == sc && s.rays == rays && s.threads == t && s.backend == b).map(|s| s.mrays_per_s);
+                let at = |t: usize| mrays(samples, sc, rays, t, b);
                 let _ = write!(out, "| {sc} | {b} | {rays} |");
                 for &t in threads {
                     match at(t) {
@@ -148,23 +171,3 @@ mod tests {
     }
 }
 
-/// native's 1-thread Mrays/s ÷ `best` (per scene and ray kind: Embree's
-/// fastest batch call, `embree_modes`), as a table.
-pub(super) fn best_call_table(samples: &[Sample], best: &[(String, &'static str, f64)]) -> String {
-    let mut out = String::from("| scene | camera 1T | shadow 1T | random 1T |\n|---|---:|---:|---:|\n");
-    for sc in in_order(best.iter().map(|b| b.0.as_str())) {
-        let mut row = format!("| {sc} |");
-        for rays in ["camera", "shadow", "random"] {
-            let native = samples.iter().find(|s| s.scene == sc && s.rays == rays && s.threads == 1 && s.backend == Contender::Backend(BackendKind::Native)).map(|s| s.mrays_per_s);
-            let e = best.iter().find(|b| b.0 == sc && b.1 == rays).map(|b| b.2);
-            match (native, e) {
-                (Some(n), Some(e)) if e > 0.0 => {
-                    let _ = write!(row, " {:.2} |", n / e);
-                }
-                _ => row.push_str(" – |"),
-            }
-        }
-        let _ = writeln!(out, "{row}");
-    }
-    out
-}
