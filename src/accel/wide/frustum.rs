@@ -223,11 +223,22 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    /// As `closest_packets`, for occlusion.
+    /// As `closest_packets`, for occlusion; on trees where streams may
+    /// pay, packets or streams as timed (`any_either_way`).
     #[inline(always)]
     unsafe fn any_packets<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool]) {
-        let mut unused = [None; PACKET];
         let order = self.any_order::<true>(rays);
+        if self.stream_shadows {
+            return self.any_either_way::<WIDE>(rays, out, order);
+        }
+        self.any_packet_way::<WIDE>(rays, out, order)
+    }
+
+    /// Occlusion in packets of `PACKET` rays: the occluder cache, then swept
+    /// boxes, interval rays or ray masks per node.
+    #[inline(always)]
+    pub(super) unsafe fn any_packet_way<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool], order: super::ChildOrder) {
+        let mut unused = [None; PACKET];
         let mut cache = OccluderCache::default();
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             if self.root & LEAF_BIT != 0 || r.len() < 2 {

@@ -25,8 +25,10 @@ mod masked;
 mod occluders;
 mod sweep;
 mod packet;
+mod stream;
 
 use kernels::{intersect_group, sort_far_first, LaneHit, Shear, Slab};
+use stream::STREAM_MIN_BYTES;
 use layout::Arrays;
 
 use super::bvh::{prim_refs, BuildSet};
@@ -134,6 +136,16 @@ pub struct WideBvh<const W: usize> {
     /// Packets prefetch the leaves (and masked packets the nodes) they are
     /// about to enter (`PACKET_PREFETCH_BYTES`).
     prefetch_packets: bool,
+    /// Occlusion batches may go in streams (`stream`) rather than
+    /// packets: the tree is large enough for streams to pay on some rays
+    /// (`STREAM_MIN_BYTES`); which way a batch goes is timed (`shadow_way`).
+    stream_shadows: bool,
+    /// The way last chosen for occlusion batches (0 none yet, 1 packets, 2
+    /// streams), the batches that asked, and each way's decayed time per
+    /// ray (`shadow_way`).
+    shadow_way: std::sync::atomic::AtomicU8,
+    way_calls: std::sync::atomic::AtomicU32,
+    way_time: [std::sync::atomic::AtomicU32; 2],
     /// The any-hit child order last chosen (`any_order`): 0 none yet, 1
     /// farthest first, 2 nearest first; and the batches that asked.
     any_order: std::sync::atomic::AtomicU8,
@@ -211,9 +223,10 @@ impl<const W: usize> WideBvh<W> {
             let code = part.build(set, &prims);
             (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, &prims);
         }
-        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), avx512: W == 8 && avx512_requested(), interleave: false, prefetch_packets: false, any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
+        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), avx512: W == 8 && avx512_requested(), interleave: false, prefetch_packets: false, stream_shadows: false, shadow_way: Default::default(), way_calls: Default::default(), way_time: Default::default(), any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
         b.interleave = b.avx && b.interleave_pays();
         b.prefetch_packets = b.memory_bytes() >= PACKET_PREFETCH_BYTES;
+        b.stream_shadows = b.avx && b.memory_bytes() >= STREAM_MIN_BYTES;
         b
     }
 

@@ -1,0 +1,446 @@
+//! Shadow rays through large trees as *streams*: a batch's rays sorted by
+//! the sign pattern of their directions (octant) into groups of up to 64,
+//! each group traced together with a ray mask per stacked node — Embree's
+//! incoherent stream for occlusion (`rtcOccluded1M` without the coherent
+//! flag), which on trees too large for the caches beats both its own
+//! packets and ours.
+//!
+//! Every node is tested by each still-unoccluded ray that entered it, one
+//! ray against the node's 8 boxes per AVX2 instruction (`entry_exit_avx`,
+//! the single-ray test's operations), which gives each child the mask of
+//! the rays entering it. Against a ray at a time, a node shared by several
+//! rays is fetched once (and prefetched when pushed), and its rays' tests
+//! are independent of one another, where a single ray's visits are a chain
+//! of dependent loads. Against the 16-ray packets (`frustum`, `sweep`,
+//! `masked`), no box bounds the rays loosely, and 64 rays share each fetch.
+//! One octant per stream fixes the near and far planes for all its rays.
+//!
+//! Answers equal single-ray traversal's: each ray enters exactly the boxes
+//! its own slab test enters and tests the same triangles with the
+//! watertight test, so it is occluded exactly when it is alone.
+
+use super::kernels::{intersect_group, intersect_group_x2, LaneHit, Shear, Slab};
+use super::{ChildOrder, WideBvh, EMPTY, LANES, LEAF_BIT, STACK};
+use crate::accel::Hit;
+use crate::geometry::RayTransform;
+use crate::ray::Ray;
+use std::mem::MaybeUninit;
+
+/// Rays per stream: one bit each in a `u64` mask.
+pub(super) const STREAM: usize = 64;
+
+/// A stream's rays: their indices in the batch, and their slab constants in
+/// SoA form (broadcast one ray at a time by the node tests).
+struct StreamRays {
+    index: [u32; STREAM],
+    o: [[f32; STREAM]; 3],
+    inv: [[f32; STREAM]; 3],
+    tmin: [f32; STREAM],
+    tmax: [f32; STREAM],
+}
+
+/// Trees smaller than this never stream: they stay in the caches, where
+/// 16-ray packets were faster on every scene measured (1 thread, shadow
+/// Mrays/s, packets / streams): cow (0.4 MiB) 38.9 / 20.8, CBbunny (1.8
+/// MiB) 42.2 / 25.0, beetle 23.2 / 15.4, maxplanck (3.5 MiB) 12.0 / 10.1.
+pub(super) const STREAM_MIN_BYTES: usize = 16 << 20;
+
+/// Which way an occlusion batch goes on a tree that may stream is timed:
+/// packets and streams each trace `WAY_SAMPLE` of a batch's rays (of
+/// batches of at least `WAY_MIN_BATCH`), every `WAY_REFRESH` such batches,
+/// and the rest of the batch, and the batches until the next sample, go
+/// the way whose decayed time per ray (`WAY_DECAY`) is lower. Neither way
+/// wins everywhere (1 thread, shadow Mrays/s, packets / streams):
+/// arch:2M 91.3 / 30.5 and stadium:2M 20.6 / 19.0, whose packets are tight
+/// swept boxes, but sphere:5M 3.22 / 4.07 and grass:500k 0.51 / 0.89,
+/// whose rays start among dense small triangles and share nodes without
+/// sharing a tight box.
+const WAY_MIN_BATCH: usize = 1024;
+const WAY_SAMPLE: usize = 256;
+const WAY_REFRESH: u32 = 16;
+const WAY_DECAY: (u32, u32) = (3, 4);
+
+impl<const W: usize> WideBvh<W> {
+    /// `any_packet_way` or `any_streams`, as timed (see `WAY_SAMPLE`;
+    /// `PATHTRACER_NATIVE_SHADOW=packets|streams` fixes the way, for
+    /// measurements). The answers are the same either way; only the speed
+    /// depends on the timing, so on the order the threads call in.
+    ///
+    /// # Safety
+    /// As `any_streams`.
+    #[inline(always)]
+    pub(super) unsafe fn any_either_way<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool], order: ChildOrder) {
+        use std::sync::atomic::Ordering::Relaxed;
+        match forced_way() {
+            1 => return self.any_packet_way::<WIDE>(rays, out, order),
+            2 => return self.any_streams(rays, out, order),
+            _ => {}
+        }
+        let kept = self.shadow_way.load(Relaxed);
+        if rays.len() < WAY_MIN_BATCH || (kept != 0 && self.way_calls.fetch_add(1, Relaxed) % WAY_REFRESH != 0) {
+            return if kept == 2 { self.any_streams(rays, out, order) } else { self.any_packet_way::<WIDE>(rays, out, order) };
+        }
+        let (a, b) = (WAY_SAMPLE, 2 * WAY_SAMPLE);
+        let t0 = std::time::Instant::now();
+        self.any_packet_way::<WIDE>(&rays[..a], &mut out[..a], order);
+        let t1 = std::time::Instant::now();
+        self.any_streams(&rays[a..b], &mut out[a..b], order);
+        let t2 = std::time::Instant::now();
+        // Nanoseconds for the sample, decayed into the running sums.
+        // Concurrent samples may lose one another's update; only the
+        // speed depends on these sums, never an answer.
+        let decayed = |w: &std::sync::atomic::AtomicU32, d: std::time::Duration| {
+            let v = (w.load(Relaxed) / WAY_DECAY.1 * WAY_DECAY.0).saturating_add(d.as_nanos().min(u32::MAX as u128 / 8) as u32);
+            w.store(v, Relaxed);
+            v
+        };
+        let packets = decayed(&self.way_time[0], t1 - t0);
+        let streams = decayed(&self.way_time[1], t2 - t1);
+        let way = if streams < packets { 2 } else { 1 };
+        self.shadow_way.store(way, Relaxed);
+        if way == 2 {
+            self.any_streams(&rays[b..], &mut out[b..], order)
+        } else {
+            self.any_packet_way::<WIDE>(&rays[b..], &mut out[b..], order)
+        }
+    }
+
+    /// `out[i]` = whether `rays[i]` is occluded, in streams of up to
+    /// `STREAM` rays of one octant each.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and the caller must be compiled with it; `W`
+    /// must be 8.
+    #[inline(always)]
+    pub(super) unsafe fn any_streams(&self, rays: &[Ray], out: &mut [bool], order: ChildOrder) {
+        debug_assert!(W == 8);
+        if self.root & LEAF_BIT != 0 || self.root == EMPTY {
+            return self.any_all_ordered::<true>(rays, out, order);
+        }
+        // Per octant, the indices of the rays waiting for a full stream.
+        let mut waiting = [[0u32; STREAM]; 8];
+        let mut count = [0usize; 8];
+        for (i, r) in rays.iter().enumerate() {
+            out[i] = false;
+            if !r.is_valid() {
+                continue;
+            }
+            let oct = (r.dir.x.is_sign_negative() as usize) | (r.dir.y.is_sign_negative() as usize) << 1 | (r.dir.z.is_sign_negative() as usize) << 2;
+            waiting[oct][count[oct]] = i as u32;
+            count[oct] += 1;
+            if count[oct] == STREAM {
+                self.any_stream(rays, &waiting[oct][..STREAM], oct, out, order);
+                count[oct] = 0;
+            }
+        }
+        for oct in 0..8 {
+            if count[oct] > 0 {
+                self.any_stream(rays, &waiting[oct][..count[oct]], oct, out, order);
+            }
+        }
+    }
+
+    /// One stream: `which` (at most `STREAM` indices into `rays`, all valid,
+    /// all of octant `oct`).
+    #[inline(always)]
+    unsafe fn any_stream(&self, rays: &[Ray], which: &[u32], oct: usize, out: &mut [bool], order: ChildOrder) {
+        use std::arch::x86_64::*;
+        let n = which.len();
+        let mut s = StreamRays { index: [0; STREAM], o: [[0.0; STREAM]; 3], inv: [[0.0; STREAM]; 3], tmin: [0.0; STREAM], tmax: [0.0; STREAM] };
+        for (k, &i) in which.iter().enumerate() {
+            let r = &rays[i as usize];
+            let slab = Slab::new(r);
+            s.index[k] = i;
+            for a in 0..3 {
+                s.o[a][k] = slab.o[a];
+                s.inv[a][k] = slab.inv[a];
+            }
+            s.tmin[k] = r.tmin;
+            s.tmax[k] = r.tmax;
+        }
+        let near_plane = [0, 1, 2].map(|a| if oct >> a & 1 != 0 { 3 + a } else { a });
+        let far_plane = near_plane.map(|p| (p + 3) % 6);
+        let mut active: u64 = if n == STREAM { u64::MAX } else { (1u64 << n) - 1 };
+        // Triangle-test constants, made the first time a ray reaches a leaf.
+        let mut setup: u64 = 0;
+        let mut rts: [MaybeUninit<RayTransform>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
+        let mut shears: [MaybeUninit<Shear>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
+        // Stack of (node, the rays that entered it, their nearest entry).
+        let mut stack = super::CacheAligned([MaybeUninit::<(u32, f32, u64)>::uninit(); STACK]);
+        let stack = &mut stack.0;
+        let mut sp = 0;
+        let (mut code, mut entered) = (self.root, active);
+        let inf = _mm256_set1_ps(f32::INFINITY);
+        let scale = _mm256_set1_ps(crate::accel::bvh::ROBUST_SCALE);
+        loop {
+            let node = &self.nodes[code as usize];
+            let rows = node.bounds.as_ptr() as *const f32;
+            // Spelled out, not `[0, 1, 2].map(..)`: see `RaysSoA::new_with`.
+            let load = |p: usize| _mm256_load_ps(rows.add(p * W));
+            let lo = [load(near_plane[0]), load(near_plane[1]), load(near_plane[2])];
+            let hi = [load(far_plane[0]), load(far_plane[1]), load(far_plane[2])];
+            // Per child, the rays entering it (two halves of 32) and their
+            // nearest entry distance.
+            let mut masks = [_mm256_setzero_si256(); 2];
+            let mut near = inf;
+            let todo = entered & active;
+            for (half, m) in masks.iter_mut().enumerate() {
+                let mut t = (todo >> (32 * half)) as u32;
+                while t != 0 {
+                    let r = t.trailing_zeros() as usize;
+                    t &= t - 1;
+                    let i = 32 * half + r;
+                    // `Slab::entry_exit_avx`'s operations, with this
+                    // stream's planes.
+                    let mut t0 = _mm256_set1_ps(s.tmin[i]);
+                    let mut t1 = _mm256_set1_ps(s.tmax[i] * crate::accel::bvh::ROBUST_SCALE);
+                    for a in 0..3 {
+                        let o = _mm256_set1_ps(s.o[a][i]);
+                        let inv = _mm256_set1_ps(s.inv[a][i]);
+                        let tn = _mm256_mul_ps(_mm256_sub_ps(lo[a], o), inv);
+                        let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi[a], o), inv), scale);
+                        t0 = _mm256_max_ps(tn, t0);
+                        t1 = _mm256_min_ps(tf, t1);
+                    }
+                    let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
+                    *m = _mm256_or_si256(*m, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << r)));
+                    near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));
+                }
+            }
+            // The children some ray entered, as bits.
+            let none = _mm256_cmpeq_epi32(_mm256_or_si256(masks[0], masks[1]), _mm256_setzero_si256());
+            let entered_children = !_mm256_movemask_ps(_mm256_castsi256_ps(none)) as u32 & 0xff;
+            if entered_children == 0 {
+                match pop(stack, &mut sp, active) {
+                    Some(e) => (code, entered) = e,
+                    None => return,
+                }
+                continue;
+            }
+            let mut child_rays = [[0u32; 8]; 2];
+            let mut child_near = [0.0f32; 8];
+            _mm256_storeu_si256(child_rays[0].as_mut_ptr() as *mut __m256i, masks[0]);
+            _mm256_storeu_si256(child_rays[1].as_mut_ptr() as *mut __m256i, masks[1]);
+            _mm256_storeu_ps(child_near.as_mut_ptr(), near);
+            // Start every entered child's fetch first: the leaves are
+            // tested right away, and their misses then overlap.
+            let mut b = entered_children;
+            while b != 0 {
+                let lane = b.trailing_zeros() as usize;
+                b &= b - 1;
+                self.prefetch(node.child[lane]);
+            }
+            let base = sp;
+            let mut b = entered_children;
+            while b != 0 {
+                let lane = b.trailing_zeros() as usize;
+                b &= b - 1;
+                let child = node.child[lane];
+                let r = (child_rays[0][lane] as u64 | (child_rays[1][lane] as u64) << 32) & active;
+                if r == 0 || child == EMPTY {
+                    continue;
+                }
+                if child & LEAF_BIT == 0 {
+                    stack[sp].write((child, child_near[lane], r));
+                    sp += 1;
+                    continue;
+                }
+                // A leaf: the rays that entered it test its triangles.
+                let leaf = self.leaf_of(child);
+                let mut m = r;
+                while m != 0 {
+                    let k = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    ready(k, &mut setup, &mut rts, &mut shears, rays, &s);
+                    if m != 0 && leaf.n_spheres == 0 {
+                        let j = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        ready(j, &mut setup, &mut rts, &mut shears, rays, &s);
+                        let found = self.leaf_pair_any(&leaf, [k, j], &s, &rts, &shears);
+                        for (q, f) in [k, j].into_iter().zip(found) {
+                            if f {
+                                out[s.index[q] as usize] = true;
+                                active &= !(1u64 << q);
+                            }
+                        }
+                        continue;
+                    }
+                    let ray = &rays[s.index[k] as usize];
+                    if self.leaf(&leaf, ray, rts[k].assume_init_ref(), shears[k].assume_init_ref(), s.tmax[k], &mut |_: Hit| true) {
+                        out[s.index[k] as usize] = true;
+                        active &= !(1u64 << k);
+                    }
+                }
+                if active == 0 {
+                    return;
+                }
+            }
+            // The child `order` visits next on top (see `ChildOrder`).
+            order.sort_pushed(std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32, u64), sp - base), |e| e.1);
+            match pop(stack, &mut sp, active) {
+                Some(e) => (code, entered) = e,
+                None => return,
+            }
+        }
+    }
+}
+
+/// Make ray `k`'s triangle-test constants the first time it reaches a
+/// leaf (bit `k` of `setup`).
+#[inline(always)]
+fn ready(k: usize, setup: &mut u64, rts: &mut [MaybeUninit<RayTransform>; STREAM], shears: &mut [MaybeUninit<Shear>; STREAM], rays: &[Ray], s: &StreamRays) {
+    if *setup >> k & 1 == 0 {
+        *setup |= 1 << k;
+        let r = &rays[s.index[k] as usize];
+        let rt = RayTransform::new(r.origin, r.dir);
+        shears[k].write(Shear::new(&rt));
+        rts[k].write(rt);
+    }
+}
+
+/// Pop the next node some still-unoccluded ray (`active`) entered, with
+/// the rays that entered it; `None` when the stack runs out.
+#[inline(always)]
+unsafe fn pop(stack: &[MaybeUninit<(u32, f32, u64)>; STACK], sp: &mut usize, active: u64) -> Option<(u32, u64)> {
+    while *sp > 0 {
+        *sp -= 1;
+        let (c, _, r) = stack[*sp].assume_init();
+        if r & active != 0 {
+            return Some((c, r));
+        }
+    }
+    None
+}
+
+impl<const W: usize> WideBvh<W> {
+    /// Whether rays `ij` of a stream hit a triangle of a triangle-only
+    /// leaf, the two tested together (`intersect_group_x2`) until one hits.
+    #[inline(always)]
+    unsafe fn leaf_pair_any(&self, leaf: &super::Leaf, ij: [usize; 2], s: &StreamRays, rts: &[MaybeUninit<RayTransform>; STREAM], shears: &[MaybeUninit<Shear>; STREAM]) -> [bool; 2] {
+        let rt = [rts[ij[0]].assume_init_ref(), rts[ij[1]].assume_init_ref()];
+        let sh = [shears[ij[0]].assume_init_ref(), shears[ij[1]].assume_init_ref()];
+        let tmin = [s.tmin[ij[0]], s.tmin[ij[1]]];
+        let tmax = [s.tmax[ij[0]], s.tmax[ij[1]]];
+        let mut found = [false; 2];
+        for gi in leaf.group..leaf.group + leaf.n_groups {
+            let g = &self.groups[gi as usize];
+            let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let real = (ids[0][0] != EMPTY) as u32 | ((ids[1][0] != EMPTY) as u32) << 1 | ((ids[2][0] != EMPTY) as u32) << 2 | ((ids[3][0] != EMPTY) as u32) << 3;
+            let mut out = [[LaneHit::default(); LANES]; 2];
+            if found[0] || found[1] {
+                let r = found[0] as usize;
+                found[r] = intersect_group(g, rt[r], sh[r], tmin[r], tmax[r], &mut out[r]) & real != 0;
+            } else {
+                let m = intersect_group_x2(g, rt, sh, tmin, tmax, &mut out);
+                found = [m[0] & real != 0, m[1] & real != 0];
+            }
+            if found[0] && found[1] {
+                break;
+            }
+        }
+        found
+    }
+}
+
+/// `PATHTRACER_NATIVE_SHADOW`: 1 packets, 2 streams, 0 timed (unset or
+/// anything else).
+fn forced_way() -> u8 {
+    static WAY: std::sync::OnceLock<u8> = std::sync::OnceLock::new();
+    *WAY.get_or_init(|| match std::env::var("PATHTRACER_NATIVE_SHADOW").as_deref() {
+        Ok("packets") => 1,
+        Ok("streams") => 2,
+        _ => 0,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::{avx_or_skip, rays, shapes};
+    use super::*;
+    use crate::accel::brute::BruteForce;
+    use crate::accel::Traversal;
+    use crate::bench::{camera_rays, load_bench_scene, shadow_rays};
+    use crate::camera::Camera;
+
+    /// `any_streams` compiled with AVX2, as its callers are.
+    #[target_feature(enable = "avx2")]
+    unsafe fn streams(bvh: &WideBvh<8>, rays: &[Ray], out: &mut [bool], order: ChildOrder) {
+        bvh.any_streams(rays, out, order)
+    }
+
+    /// Streams answer as brute force: meshes and a sphere in one tree,
+    /// camera, random and tight rays of every octant (more than a stream
+    /// of some), short rays, rays starting inside boxes, invalid rays
+    /// among them; both child orders; batches of every size from one ray
+    /// (a stream of one) to all of them.
+    #[test]
+    fn streams_match_brute_force() {
+        if !avx_or_skip("the occlusion streams") {
+            return;
+        }
+        let shapes = shapes();
+        let rays = rays(&shapes);
+        let brute = BruteForce::new(&shapes);
+        let want: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
+        assert!(want.iter().filter(|&&o| o).count() > 1000 && want.iter().filter(|&&o| !o).count() > 1000, "too few of one answer");
+        let bvh = WideBvh::<8>::build(&shapes);
+        for order in [ChildOrder::FarthestFirst, ChildOrder::NearestFirst] {
+            for chunk in [rays.len(), 4096, 777, 64, 65, 3, 1] {
+                let mut got = vec![true; rays.len()];
+                for (r, o) in rays.chunks(chunk).zip(got.chunks_mut(chunk)) {
+                    unsafe { streams(&bvh, r, o, order) };
+                }
+                let bad: Vec<usize> = (0..rays.len()).filter(|&i| got[i] != want[i]).collect();
+                assert!(bad.is_empty(), "{order:?}, batches of {chunk}: {} mismatches, first {:?}", bad.len(), bad.first().map(|&i| rays[i]));
+            }
+        }
+    }
+
+    /// On bench scenes whose shadow rays start among dense small triangles
+    /// (the subdivided scan, grass), and with every ray's range ending
+    /// exactly at its own closest hit (where the robust box bound decides),
+    /// streams answer as single rays.
+    #[test]
+    fn streamed_shadow_rays_answer_as_single_rays() {
+        if !avx_or_skip("the occlusion streams") {
+            return;
+        }
+        for spec in ["subdiv:CBbunny:100k", "grass:30k"] {
+            let scene = load_bench_scene(spec).unwrap();
+            let bvh = WideBvh::<8>::build(&scene.shapes);
+            let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
+            let mut rays = shadow_rays(&scene, &bvh, &cam);
+            // Camera rays ending exactly at their hit: each is occluded.
+            let ending: Vec<Ray> = cam.iter().filter_map(|r| bvh.intersect(r).map(|h| Ray::with_range(r.origin, r.dir, r.tmin, h.t))).collect();
+            let n_ending = ending.len();
+            rays.extend(ending);
+            let mut got = vec![false; rays.len()];
+            for (r, o) in rays.chunks(4096).zip(got.chunks_mut(4096)) {
+                unsafe { streams(&bvh, r, o, ChildOrder::FarthestFirst) };
+            }
+            let bad = rays.iter().zip(&got).filter(|(r, o)| bvh.occluded(r) != **o).count();
+            assert_eq!(bad, 0, "{spec}: streamed shadow rays differ from single rays");
+            assert!(got[got.len() - n_ending..].iter().all(|&o| o), "{spec}: a ray ending at its hit was not occluded");
+        }
+    }
+
+    /// A tree that may stream times both ways on a large batch, keeps the
+    /// faster, and answers as single rays whichever way each batch went.
+    #[test]
+    fn the_timed_choice_of_way_keeps_the_answers() {
+        if !avx_or_skip("the occlusion streams") {
+            return;
+        }
+        let shapes = shapes();
+        let rays = rays(&shapes);
+        let mut bvh = WideBvh::<8>::build(&shapes);
+        bvh.stream_shadows = true;
+        let want: Vec<bool> = rays.iter().map(|r| bvh.occluded(r)).collect();
+        for round in 0..3 {
+            let mut got = vec![false; rays.len()];
+            bvh.occluded_coherent(&rays, &mut got);
+            assert_eq!(got, want, "round {round}");
+            assert_ne!(bvh.shadow_way.load(std::sync::atomic::Ordering::Relaxed), 0, "no way was chosen");
+        }
+    }
+}
