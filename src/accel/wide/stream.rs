@@ -37,6 +37,8 @@ struct StreamRays {
     inv: [[f32; STREAM]; 3],
     tmin: [f32; STREAM],
     tmax: [f32; STREAM],
+    /// `tmax` enlarged by `ROBUST_SCALE`, as the slab test enlarges it.
+    far: [f32; STREAM],
 }
 
 /// Trees smaller than this never stream: they stay in the caches, where
@@ -146,7 +148,7 @@ impl<const W: usize> WideBvh<W> {
     unsafe fn any_stream(&self, rays: &[Ray], which: &[u32], oct: usize, out: &mut [bool], order: ChildOrder) {
         use std::arch::x86_64::*;
         let n = which.len();
-        let mut s = StreamRays { index: [0; STREAM], o: [[0.0; STREAM]; 3], inv: [[0.0; STREAM]; 3], tmin: [0.0; STREAM], tmax: [0.0; STREAM] };
+        let mut s = StreamRays { index: [0; STREAM], o: [[0.0; STREAM]; 3], inv: [[0.0; STREAM]; 3], tmin: [0.0; STREAM], tmax: [0.0; STREAM], far: [0.0; STREAM] };
         for (k, &i) in which.iter().enumerate() {
             let r = &rays[i as usize];
             let slab = Slab::new(r);
@@ -157,6 +159,7 @@ impl<const W: usize> WideBvh<W> {
             }
             s.tmin[k] = r.tmin;
             s.tmax[k] = r.tmax;
+            s.far[k] = r.tmax * crate::accel::bvh::ROBUST_SCALE;
         }
         let near_plane = [0, 1, 2].map(|a| if oct >> a & 1 != 0 { 3 + a } else { a });
         let far_plane = near_plane.map(|p| (p + 3) % 6);
@@ -193,7 +196,7 @@ impl<const W: usize> WideBvh<W> {
                     // `Slab::entry_exit_avx`'s operations, with this
                     // stream's planes.
                     let mut t0 = _mm256_set1_ps(s.tmin[i]);
-                    let mut t1 = _mm256_set1_ps(s.tmax[i] * crate::accel::bvh::ROBUST_SCALE);
+                    let mut t1 = _mm256_set1_ps(s.far[i]);
                     for a in 0..3 {
                         let o = _mm256_set1_ps(s.o[a][i]);
                         let inv = _mm256_set1_ps(s.inv[a][i]);
@@ -449,3 +452,4 @@ mod tests {
         }
     }
 }
+
