@@ -103,20 +103,10 @@ impl Slab {
         debug_assert_eq!(W, 8);
         // Rows are 32 bytes and the node is 64-byte aligned.
         let rows = n.bounds.as_ptr() as *const f32;
-        let mut t0 = _mm256_set1_ps(tmin);
-        let mut t1 = _mm256_set1_ps(tmax * ROBUST_SCALE);
-        let scale = _mm256_set1_ps(ROBUST_SCALE);
-        for a in 0..3 {
-            let o = _mm256_set1_ps(self.o[a]);
-            let inv = _mm256_set1_ps(self.inv[a]);
-            let lo = _mm256_load_ps(rows.add(self.near_plane[a] * W));
-            let hi = _mm256_load_ps(rows.add((self.near_plane[a] + 3) % 6 * W));
-            let tn = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-            let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi, o), inv), scale);
-            t0 = _mm256_max_ps(tn, t0);
-            t1 = _mm256_min_ps(tf, t1);
-        }
-        (t0, t1)
+        let load = |p: usize| _mm256_load_ps(rows.add(p * W));
+        let lo = [load(self.near_plane[0]), load(self.near_plane[1]), load(self.near_plane[2])];
+        let hi = [load((self.near_plane[0] + 3) % 6), load((self.near_plane[1] + 3) % 6), load((self.near_plane[2] + 3) % 6)];
+        slab_planes_avx(&lo, &hi, self.o, self.inv, tmin, tmax * ROBUST_SCALE)
     }
 
     /// `test` one lane at a time, for targets without x86 SIMD (and the
@@ -146,6 +136,40 @@ impl Slab {
         }
         mask
     }
+}
+
+/// The slab test of one ray against 8 boxes whose near and far planes are
+/// already loaded (`lo`, `hi`, per axis), `far` being `tmax` enlarged by
+/// `ROBUST_SCALE`: per box, the entry and the (scaled) exit distance. The
+/// one sequence of operations behind `Slab::entry_exit_avx` and the
+/// streams' node tests (`stream`), whose rays share their planes.
+///
+/// # Safety
+/// The caller runs with AVX2 enabled.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(super) unsafe fn slab_planes_avx(
+    lo: &[std::arch::x86_64::__m256; 3],
+    hi: &[std::arch::x86_64::__m256; 3],
+    o: [f32; 3],
+    inv: [f32; 3],
+    tmin: f32,
+    far: f32,
+) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
+    let scale = _mm256_set1_ps(ROBUST_SCALE);
+    let mut t0 = _mm256_set1_ps(tmin);
+    let mut t1 = _mm256_set1_ps(far);
+    for a in 0..3 {
+        let o = _mm256_set1_ps(o[a]);
+        let inv = _mm256_set1_ps(inv[a]);
+        let tn = _mm256_mul_ps(_mm256_sub_ps(lo[a], o), inv);
+        let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi[a], o), inv), scale);
+        // maxps(a, b) = a > b ? a : b, so a NaN in tn leaves t0 as it is.
+        t0 = _mm256_max_ps(tn, t0);
+        t1 = _mm256_min_ps(tf, t1);
+    }
+    (t0, t1)
 }
 
 /// The watertight test's per-ray shear, as axis indices and broadcastable constants.

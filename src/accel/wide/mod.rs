@@ -444,14 +444,7 @@ impl<const W: usize> WideBvh<W> {
                 self.any_counted::<AVX>(r, ChildOrder::NearestFirst, &mut near);
             }
         }
-        // Concurrent samples may lose one another's update; only the
-        // speed depends on these sums, never an answer.
-        let decayed = |w: &std::sync::atomic::AtomicU32, sample: u32| {
-            let v = w.load(Relaxed) / ORDER_DECAY.1 * ORDER_DECAY.0 + sample;
-            w.store(v, Relaxed);
-            v
-        };
-        let (far, near) = (decayed(&self.order_work[0], far), decayed(&self.order_work[1], near));
+        let (far, near) = (decayed_sum(&self.order_work[0], far, ORDER_DECAY), decayed_sum(&self.order_work[1], near, ORDER_DECAY));
         let nearest = (near as u64) * ORDER_MARGIN.1 < (far as u64) * ORDER_MARGIN.0;
         self.any_order.store(1 + nearest as u8, Relaxed);
         if nearest {
@@ -538,6 +531,19 @@ impl ChildOrder {
             ChildOrder::FarthestFirst => sort_far_first(pushed, |e| -dist(e)),
         }
     }
+}
+
+/// A running sum that keeps `decay.0 / decay.1` of what it held and adds
+/// `sample`; returns the new sum. For the timed and counted choices
+/// (`any_order`, `any_either_way`): concurrent samples may lose one
+/// another's update, and only the speed depends on these sums, never an
+/// answer.
+#[inline(always)]
+fn decayed_sum(w: &std::sync::atomic::AtomicU32, sample: u32, decay: (u32, u32)) -> u32 {
+    use std::sync::atomic::Ordering::Relaxed;
+    let v = (w.load(Relaxed) / decay.1 * decay.0).saturating_add(sample);
+    w.store(v, Relaxed);
+    v
 }
 
 /// Pop stacked children until one whose entry distance is within `tmax`

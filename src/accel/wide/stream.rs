@@ -19,7 +19,7 @@
 //! its own slab test enters and tests the same triangles with the
 //! watertight test, so it is occluded exactly when it is alone.
 
-use super::kernels::{intersect_group, intersect_group_x2, LaneHit, Shear, Slab};
+use super::kernels::{intersect_group, intersect_group_x2, slab_planes_avx, LaneHit, Shear, Slab};
 use super::{ChildOrder, WideBvh, EMPTY, LANES, LEAF_BIT, STACK};
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
@@ -89,15 +89,9 @@ impl<const W: usize> WideBvh<W> {
         self.any_streams(&rays[a..b], &mut out[a..b], order);
         let t2 = std::time::Instant::now();
         // Nanoseconds for the sample, decayed into the running sums.
-        // Concurrent samples may lose one another's update; only the
-        // speed depends on these sums, never an answer.
-        let decayed = |w: &std::sync::atomic::AtomicU32, d: std::time::Duration| {
-            let v = (w.load(Relaxed) / WAY_DECAY.1 * WAY_DECAY.0).saturating_add(d.as_nanos().min(u32::MAX as u128 / 8) as u32);
-            w.store(v, Relaxed);
-            v
-        };
-        let packets = decayed(&self.way_time[0], t1 - t0);
-        let streams = decayed(&self.way_time[1], t2 - t1);
+        let ns = |d: std::time::Duration| d.as_nanos().min(u32::MAX as u128 / 8) as u32;
+        let packets = super::decayed_sum(&self.way_time[0], ns(t1 - t0), WAY_DECAY);
+        let streams = super::decayed_sum(&self.way_time[1], ns(t2 - t1), WAY_DECAY);
         let way = if streams < packets { 2 } else { 1 };
         self.shadow_way.store(way, Relaxed);
         if way == 2 {
@@ -174,7 +168,6 @@ impl<const W: usize> WideBvh<W> {
         let mut sp = 0;
         let (mut code, mut entered) = (self.root, active);
         let inf = _mm256_set1_ps(f32::INFINITY);
-        let scale = _mm256_set1_ps(crate::accel::bvh::ROBUST_SCALE);
         loop {
             let node = &self.nodes[code as usize];
             let rows = node.bounds.as_ptr() as *const f32;
@@ -195,16 +188,7 @@ impl<const W: usize> WideBvh<W> {
                     let i = 32 * half + r;
                     // `Slab::entry_exit_avx`'s operations, with this
                     // stream's planes.
-                    let mut t0 = _mm256_set1_ps(s.tmin[i]);
-                    let mut t1 = _mm256_set1_ps(s.far[i]);
-                    for a in 0..3 {
-                        let o = _mm256_set1_ps(s.o[a][i]);
-                        let inv = _mm256_set1_ps(s.inv[a][i]);
-                        let tn = _mm256_mul_ps(_mm256_sub_ps(lo[a], o), inv);
-                        let tf = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(hi[a], o), inv), scale);
-                        t0 = _mm256_max_ps(tn, t0);
-                        t1 = _mm256_min_ps(tf, t1);
-                    }
+                    let (t0, t1) = slab_planes_avx(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.far[i]);
                     let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
                     *m = _mm256_or_si256(*m, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << r)));
                     near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));
