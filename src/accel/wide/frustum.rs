@@ -541,7 +541,7 @@ impl<const W: usize> WideBvh<W> {
     /// A triangle-only leaf for rays `ij` together (`intersect_group_x2`),
     /// as `leaf` would for each: every group tested with the range each ray
     /// had on entering the leaf, closest hits kept by the tie rule. With
-    /// `ANY`, returns which rays found a hit (and stops testing them).
+    /// `ANY`, returns which rays found a hit (`leaf_pair_any`).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     pub(super) unsafe fn leaf_pair<const ANY: bool>(
@@ -558,22 +558,46 @@ impl<const W: usize> WideBvh<W> {
         let sh = ij.map(|i| shears[i].assume_init_ref());
         let tmin = ij.map(|i| rays[i].tmin);
         let range = ij.map(|i| tmax[i]);
+        if ANY {
+            return self.leaf_pair_any(leaf, rt, sh, tmin, range);
+        }
         let mut found = [false; 2];
         for gi in leaf.group..leaf.group + leaf.n_groups {
             let g = &self.groups[gi as usize];
             let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
             let mut out = [[LaneHit::default(); LANES]; 2];
-            let masks = if ANY && (found[0] || found[1]) {
-                // One ray is done: the other goes on alone.
-                let r = if found[0] { 1 } else { 0 };
-                let mut m = [0; 2];
-                m[r] = intersect_group(g, rt[r], sh[r], tmin[r], range[r], &mut out[r]);
-                m
-            } else {
-                intersect_group_x2(g, rt, sh, tmin, range, &mut out)
+            let masks = intersect_group_x2(g, rt, sh, tmin, range, &mut out);
+            take_hits::<false, 2>(ij, masks, &out, ids, &mut found, tmax, hits);
+        }
+        found
+    }
+
+    /// Whether two rays (their transforms, shears and ranges) hit a
+    /// triangle of a triangle-only leaf: tested together until one hits,
+    /// then the other alone. Shared by the packets' occlusion (`leaf_pair`)
+    /// and the streams, which keep their rays' state in arrays of their own.
+    #[inline(always)]
+    pub(super) unsafe fn leaf_pair_any(&self, leaf: &super::Leaf, rt: [&RayTransform; 2], sh: [&Shear; 2], tmin: [f32; 2], tmax: [f32; 2]) -> [bool; 2] {
+        let mut found = [false; 2];
+        for gi in leaf.group..leaf.group + leaf.n_groups {
+            let g = &self.groups[gi as usize];
+            // Padding lanes are told apart only for a hit: the ids sit apart
+            // from the vertices, and loading them for every group missed the
+            // caches (8 % of grass's streamed shadow rays).
+            let real = |m: u32| {
+                let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+                m != 0 && (0..LANES).any(|l| m >> l & 1 != 0 && ids[l][0] != EMPTY)
             };
-            take_hits::<ANY, 2>(ij, masks, &out, ids, &mut found, tmax, hits);
-            if ANY && found[0] && found[1] {
+            let mut out = [[LaneHit::default(); LANES]; 2];
+            if found[0] || found[1] {
+                // One ray is done: the other goes on alone.
+                let r = found[0] as usize;
+                found[r] = real(intersect_group(g, rt[r], sh[r], tmin[r], tmax[r], &mut out[r]));
+            } else {
+                let m = intersect_group_x2(g, rt, sh, tmin, tmax, &mut out);
+                found = [real(m[0]), real(m[1])];
+            }
+            if found[0] && found[1] {
                 break;
             }
         }

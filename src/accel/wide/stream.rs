@@ -19,8 +19,8 @@
 //! its own slab test enters and tests the same triangles with the
 //! watertight test, so it is occluded exactly when it is alone.
 
-use super::kernels::{intersect_group, intersect_group_x2, slab_planes_avx, LaneHit, Shear, Slab};
-use super::{ChildOrder, WideBvh, EMPTY, LANES, LEAF_BIT, STACK};
+use super::kernels::{slab_planes_avx, Shear, Slab};
+use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT, STACK};
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
@@ -243,7 +243,7 @@ impl<const W: usize> WideBvh<W> {
                         let j = m.trailing_zeros() as usize;
                         m &= m - 1;
                         ready(j, &mut setup, &mut rts, &mut shears, rays, &s);
-                        let found = self.leaf_pair_any(&leaf, [k, j], &s, &rts, &shears);
+                        let found = self.leaf_pair_any(&leaf, [rts[k].assume_init_ref(), rts[j].assume_init_ref()], [shears[k].assume_init_ref(), shears[j].assume_init_ref()], [s.tmin[k], s.tmin[j]], [s.tmax[k], s.tmax[j]]);
                         for (q, f) in [k, j].into_iter().zip(found) {
                             if f {
                                 out[s.index[q] as usize] = true;
@@ -297,41 +297,6 @@ unsafe fn pop(stack: &[MaybeUninit<(u32, f32, u64)>; STACK], sp: &mut usize, act
         }
     }
     None
-}
-
-impl<const W: usize> WideBvh<W> {
-    /// Whether rays `ij` of a stream hit a triangle of a triangle-only
-    /// leaf, the two tested together (`intersect_group_x2`) until one hits.
-    #[inline(always)]
-    unsafe fn leaf_pair_any(&self, leaf: &super::Leaf, ij: [usize; 2], s: &StreamRays, rts: &[MaybeUninit<RayTransform>; STREAM], shears: &[MaybeUninit<Shear>; STREAM]) -> [bool; 2] {
-        let rt = [rts[ij[0]].assume_init_ref(), rts[ij[1]].assume_init_ref()];
-        let sh = [shears[ij[0]].assume_init_ref(), shears[ij[1]].assume_init_ref()];
-        let tmin = [s.tmin[ij[0]], s.tmin[ij[1]]];
-        let tmax = [s.tmax[ij[0]], s.tmax[ij[1]]];
-        let mut found = [false; 2];
-        for gi in leaf.group..leaf.group + leaf.n_groups {
-            let g = &self.groups[gi as usize];
-            // Padding lanes are told apart only for a hit: the ids sit
-            // apart from the vertices, and loading them for every group
-            // missed the caches (8 % of grass's streamed shadow rays).
-            let real = |m: u32| {
-                let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
-                m != 0 && (0..LANES).any(|l| m >> l & 1 != 0 && ids[l][0] != EMPTY)
-            };
-            let mut out = [[LaneHit::default(); LANES]; 2];
-            if found[0] || found[1] {
-                let r = found[0] as usize;
-                found[r] = real(intersect_group(g, rt[r], sh[r], tmin[r], tmax[r], &mut out[r]));
-            } else {
-                let m = intersect_group_x2(g, rt, sh, tmin, tmax, &mut out);
-                found = [real(m[0]), real(m[1])];
-            }
-            if found[0] && found[1] {
-                break;
-            }
-        }
-        found
-    }
 }
 
 /// `PATHTRACER_NATIVE_SHADOW`: 1 packets, 2 streams, 0 timed (unset or
