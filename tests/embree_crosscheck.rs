@@ -163,6 +163,12 @@ fn embree_batches_match_single_rays() {
     // Invalid rays inside a batch must not disturb their neighbours.
     rays[7].dir = glam::Vec3::ZERO;
     rays[100].origin.x = f32::NAN;
+    // Also past the first of the 256-ray chunks the shim's stream mode hands
+    // to Embree, and in the last, partial one.
+    let last = rays.len() - 1;
+    rays[300].dir = glam::Vec3::ZERO;
+    rays[last].origin.y = f32::NAN;
+    assert!(rays.len() % 256 != 0);
     let single: Vec<Option<Hit>> = rays.iter().map(|r| embree.intersect(r)).collect();
     let single_occ: Vec<bool> = rays.iter().map(|r| embree.occluded(r)).collect();
     let mut hits = vec![None; rays.len()];
@@ -185,7 +191,7 @@ fn embree_batches_match_single_rays() {
             assert!(ok, "coherent={coherent} ray {i}: batch {a:?} single {b:?}");
         }
     }
-    assert!(hits[7].is_none() && hits[100].is_none());
+    assert!(hits[7].is_none() && hits[100].is_none() && hits[300].is_none() && hits[last].is_none());
 }
 
 #[test]
