@@ -209,7 +209,9 @@ enum RayKind {
     Random,
     /// Shadow rays through the incoherent batch call (`occluded_batch`):
     /// only for the Embree batch-call table, where Embree's stream with the
-    /// incoherent flag is its fastest call on some scenes.
+    /// incoherent flag is its fastest call on some scenes (so unused in a
+    /// build without Embree).
+    #[cfg_attr(not(has_embree), allow(dead_code))]
     ShadowIncoherent,
 }
 
