@@ -19,6 +19,7 @@
 mod cost;
 mod frustum;
 mod interleave;
+mod leaf_rays;
 mod kernels;
 mod layout;
 mod masked;
