@@ -5,23 +5,26 @@
 //! The ray sets are public so the cross-check tests trace exactly what the
 //! benchmark times.
 
-use crate::accel::{self, BackendKind, Hit, Traversal};
+use crate::accel::{self, BackendKind, Traversal};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::ray::Ray;
 use crate::light::Lights;
 use crate::render::{self, normals::NormalShading, path::PathTracer, RenderSettings};
-use crate::rng::Rng;
 use crate::scene::{Scene, TriangleMesh};
 use clap::Args;
 use glam::Vec3;
-use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
+mod rays;
 pub mod scenes;
 mod tables;
+mod timing;
+
+pub use rays::{camera_rays, random_rays, shadow_rays};
+pub use timing::PASSES;
+use timing::{throughput, throughputs, RayKind};
 
 pub use tables::Sample;
 use tables::{ratio_table, scaling_table};
@@ -156,139 +159,6 @@ pub fn load_bench_scene(name: &str) -> Result<Scene> {
     crate::scene::load_file(&find_scene(name)?)
 }
 
-/// Camera rays through the pixel centres of a `w x h` frame, scanline order.
-pub fn camera_rays(camera: &Camera, w: u32, h: u32) -> Vec<Ray> {
-    let mut rays = Vec::with_capacity((w * h) as usize);
-    for y in 0..h {
-        for x in 0..w {
-            rays.push(camera.generate_ray((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32));
-        }
-    }
-    rays
-}
-
-/// Incoherent rays: origins uniform in the scene bounds grown by 10 % on
-/// every side (so some start outside), directions uniform on the sphere.
-pub fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
-    let b = scene.bounds();
-    let grow = b.extent() * 0.1 + Vec3::splat(1e-3);
-    let (lo, size) = (b.min - grow, b.extent() + 2.0 * grow);
-    let mut rng = Rng::new(seed, 0xB0B);
-    (0..n)
-        .map(|_| {
-            let o = lo + size * Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
-            let z = 1.0 - 2.0 * rng.uniform();
-            let phi = 2.0 * std::f32::consts::PI * rng.uniform();
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            Ray::new(o, Vec3::new(r * phi.cos(), r * phi.sin(), z))
-        })
-        .collect()
-}
-
-/// Shadow rays from the first hits of `primary` towards a point above the
-/// scene's bounding box, stopping just short of it.
-pub fn shadow_rays(scene: &Scene, accel: &dyn Traversal, primary: &[Ray]) -> Vec<Ray> {
-    let b = scene.bounds();
-    let light = Vec3::new(b.center().x, b.max.y - 0.02 * b.extent().y, b.center().z);
-    primary
-        .par_iter()
-        .filter_map(|r| accel.intersect(r).map(|h| (r, h)))
-        .map(|(r, h): (&Ray, Hit)| {
-            let p = r.at(h.t);
-            let d = light - p;
-            // Start a hair off the surface so the ray does not re-hit it.
-            Ray::with_range(p, d, 1e-4, 1.0 - 1e-4)
-        })
-        .collect()
-}
-
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum RayKind {
-    Camera,
-    Shadow,
-    Random,
-    /// Shadow rays through the incoherent batch call (`occluded_batch`):
-    /// only for the Embree batch-call table, where Embree's stream with the
-    /// incoherent flag is its fastest call on some scenes (so unused in a
-    /// build without Embree).
-    #[cfg_attr(not(has_embree), allow(dead_code))]
-    ShadowIncoherent,
-}
-
-/// Best-of-`reps` Mrays/s on `threads` threads, chunks of 4096 rays, after
-/// one untimed pass when `reps` > 1 (brute force's single long pass needs
-/// none). Camera and shadow rays go through the coherent batch calls,
-/// random rays through the plain ones. Without the warm-up pass, the first
-/// backend measured on the first scene often read a third low in all three
-/// timed passes (cow camera rays, 1 thread: 39-54 Mrays/s in four of seven
-/// runs, 65-66 in the others), as if the CPU were still clocking up.
-fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize, reps: usize) -> f64 {
-    timed_passes(&[accel], rays, kind, threads, reps, reps > 1)[0]
-}
-
-/// Timed passes per contender in `throughputs`.
-pub const PASSES: usize = 5;
-
-/// `throughput` for several structures on the same rays, their passes
-/// alternating — one untimed pass each, then `passes` rounds of one timed
-/// pass each — and the best pass of each kept. Timed one structure after
-/// the other (three passes each), a slow stretch of this shared VM that
-/// fell on one contender's passes decided the ratio: arch_2M shadow rays
-/// read native ÷ Embree 0.63 in a full bench run and 1.01 / 0.99 in two
-/// runs of that scene alone, with the same binary.
-fn throughputs(accels: &[&dyn Traversal], rays: &[Ray], kind: RayKind, threads: usize, passes: usize) -> Vec<f64> {
-    timed_passes(accels, rays, kind, threads, passes, true)
-}
-
-/// Mrays/s of each of `accels`: `passes` rounds of one timed pass each,
-/// after one untimed round when `warm_up`, the best pass of each kept.
-fn timed_passes(accels: &[&dyn Traversal], rays: &[Ray], kind: RayKind, threads: usize, passes: usize, warm_up: bool) -> Vec<f64> {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
-    let mut best = vec![f64::INFINITY; accels.len()];
-    let skip = warm_up as usize;
-    for pass in 0..passes + skip {
-        for (a, b) in accels.iter().zip(best.iter_mut()) {
-            let start = Instant::now();
-            pool.install(|| trace_pass(*a, rays, kind));
-            if pass >= skip {
-                *b = b.min(start.elapsed().as_secs_f64());
-            }
-        }
-    }
-    best.iter().map(|b| rays.len() as f64 / b / 1e6).collect()
-}
-
-/// One pass of `rays` through `accel` on the current pool, chunks of 4096,
-/// each its own task (`with_max_len(1)`): rayon's default splitting cut a
-/// pass into a few long runs of chunks, and where the costly rays are
-/// bunched (the camera rays that hit arch's building, a band of the frame)
-/// one thread was left with most of them — arch_2M camera rays scaled 1.29x
-/// from 1 to 2 threads for native and 1.98x for Embree in one run.
-fn trace_pass(accel: &dyn Traversal, rays: &[Ray], kind: RayKind) {
-    rays.par_chunks(4096).with_max_len(1).for_each(|chunk| match kind {
-        RayKind::Shadow => {
-            let mut out = vec![false; chunk.len()];
-            accel.occluded_coherent(chunk, &mut out);
-            std::hint::black_box(&out);
-        }
-        RayKind::ShadowIncoherent => {
-            let mut out = vec![false; chunk.len()];
-            accel.occluded_batch(chunk, &mut out);
-            std::hint::black_box(&out);
-        }
-        RayKind::Camera => {
-            let mut out = vec![None; chunk.len()];
-            accel.intersect_coherent(chunk, &mut out);
-            std::hint::black_box(&out);
-        }
-        RayKind::Random => {
-            let mut out = vec![None; chunk.len()];
-            accel.intersect_batch(chunk, &mut out);
-            std::hint::black_box(&out);
-        }
-    })
-}
-
 /// The CPU's model name and the SIMD extensions the backends can use, so a
 /// table says what it was measured on.
 fn cpu_model() -> String {
@@ -357,7 +227,7 @@ impl Contender {
             #[cfg(feature = "peers")]
             Contender::Obvhs => {
                 // obvhs builds on rayon's global pool (all threads).
-                let start = Instant::now();
+                let start = std::time::Instant::now();
                 let accel = Box::new(accel::obvhs_peer::ObvhsPeer::build(&scene.shapes)?);
                 Ok(accel::Built { accel, build_seconds: start.elapsed().as_secs_f64() })
             }
