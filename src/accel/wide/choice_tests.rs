@@ -3,6 +3,7 @@
 //! which child order any-hit rays take (`any_order`).
 
 use super::interleave::{COLD_LINES, HOT_ITEMS};
+use super::single::ORDER_MIN_BATCH;
 use super::tests::{rays, shapes, tight_packets};
 use super::*;
 use crate::accel::brute::BruteForce;
