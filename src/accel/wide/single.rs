@@ -15,29 +15,29 @@ use std::mem::MaybeUninit;
 /// child order from `ORDER_SAMPLE` of them (`any_order`), every
 /// `ORDER_REFRESH` such batches.
 pub(super) const ORDER_MIN_BATCH: usize = 256;
-pub(super) const ORDER_SAMPLE: usize = 16;
-pub(super) const ORDER_REFRESH: u32 = 16;
+const ORDER_SAMPLE: usize = 16;
+const ORDER_REFRESH: u32 = 16;
 /// Each sample's work is added to a running sum that keeps 3/4 of the
 /// older ones, and the choice follows the sums: one sample of 16 rays
 /// was too noisy. On the subdivided bunny's shadow rays (1 thread, 65
 /// samples) the single samples chose nearest first 28 times while their
 /// sums favoured farthest first 14.0k to 16.9k visits, and the batches
 /// ran at 4.2 Mrays/s against 5.9 with farthest first throughout.
-pub(super) const ORDER_DECAY: (u32, u32) = (3, 4);
+const ORDER_DECAY: (u32, u32) = (3, 4);
 /// Nearest first is chosen only where its sampled work is below 7/8 of
 /// farthest first's. The sample times single rays; coherent batches go in
 /// packets, where nearest first's saving showed up smaller: on maxplanck
 /// its sums were 5 % below farthest first's, yet its shadow rays ran at
 /// 10.7 Mrays/s against 11.8 (1 thread); on stadium 22 % below (24.1
 /// against 19.8 Mrays/s), on grass 62 % below (0.24 against 0.15).
-pub(super) const ORDER_MARGIN: (u64, u64) = (7, 8);
+const ORDER_MARGIN: (u64, u64) = (7, 8);
 
 impl<const W: usize> WideBvh<W> {
     /// Front-to-back traversal; `visit` may lower `tmax` and returns true to
     /// stop. `AVX` selects the AVX2 box test, which the caller must have
     /// checked the CPU has (`self.avx`) and compiled for (`#[target_feature]`).
     #[inline(always)]
-    pub(super) fn walk<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32, mut visit: F) {
+    fn walk<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32, mut visit: F) {
         if self.root == EMPTY {
             return;
         }
@@ -133,7 +133,7 @@ impl<const W: usize> WideBvh<W> {
 
     /// `any`, adding the nodes and leaf groups it visits to `work`.
     #[inline(always)]
-    pub(super) fn any_counted<const AVX: bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32) -> bool {
+    fn any_counted<const AVX: bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32) -> bool {
         let mut hit = false;
         self.walk::<AVX, true, _>(ray, order, work, |_, _| {
             hit = true;
