@@ -50,6 +50,27 @@ def ratio_table(runs):
     return "\n".join(out)
 
 
+def agreement(runs, tolerance=0.2, goal=0.5):
+    """Markdown lines: how many rows (the `-H` ones aside: the naive estimator on purpose)
+    agree between every pair of runs within `tolerance` (max ratio ÷ min ratio <= 1 +
+    tolerance), the ones that do not, and the rows above `goal` in any run, unrounded."""
+    table = {}
+    for i, (_, rows) in enumerate(runs):
+        for r in rows:
+            eq = r.get("equal_time_rel_mse_ratio")
+            if eq and "-H" not in r.get("flags", []):
+                table.setdefault((r["case"], r["backend"], r["reference"]), [None] * len(runs))[i] = eq["ratio"]
+    both = {k: v for k, v in table.items() if all(x is not None for x in v)}
+    apart = {k: max(v) / min(v) for k, v in both.items() if max(v) > (1 + tolerance) * min(v)}
+    fmt = lambda k, v: f"{k[0]} {k[1]} ÷ {k[2]} " + " / ".join("–" if x is None else f"{x:.3f}" for x in v)
+    out = [f"{len(both) - len(apart)} of {len(both)} rows (`-H` aside) agree between the runs within {100 * tolerance:.0f} %."]
+    out += [f"* apart by {f:.2f}×: {fmt(k, both[k])}" for k, f in sorted(apart.items(), key=lambda kv: -kv[1])]
+    above = {k: v for k, v in table.items() if any(x is not None and x > goal for x in v)}
+    out.append(f"{len(above)} rows above {goal} in some run" + (":" if above else "."))
+    out += [f"* {fmt(k, v)}" for k, v in sorted(above.items(), key=lambda kv: -max(x or 0 for x in kv[1]))]
+    return "\n".join(out)
+
+
 def svg(rows, cases, width=330, height=240):
     """Small multiples: one log-log panel per case, relMSE against sample time."""
     panels = []
@@ -104,6 +125,8 @@ def main():
     args = ap.parse_args()
     runs = [load(p) for p in args.summaries]
     table = ratio_table(runs)
+    if len(runs) > 1:
+        table += "\n\n" + agreement(runs)
     if args.markdown:
         with open(args.markdown, "w") as f:
             f.write(table + "\n")
