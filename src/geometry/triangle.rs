@@ -149,6 +149,17 @@ pub fn area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
     (0.5 * edge_cross(a, b, c).length()) as f32
 }
 
+/// The point with barycentrics `(u, v)` (weights of `b` and `c`) on triangle
+/// `abc`, interpolated from `a` along the edges: where the vertices share a
+/// coordinate (an axis-aligned wall or light) it comes out exact, and
+/// elsewhere the error scales with the edges, not with the coordinates. As
+/// a·w + b·u + c·v it was ~3.5 ulps of the largest coordinate (pbrt's bound),
+/// and rays spawned at such hits re-hit their own triangle from 1 ulp off
+/// (`sampling::OFFSET_ULPS`).
+pub fn point_at(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32) -> Vec3 {
+    a + (b - a) * u + (c - a) * v
+}
+
 /// (b − a) × (c − a) in f64.
 pub fn edge_cross(a: Vec3, b: Vec3, c: Vec3) -> glam::DVec3 {
     let a = a.as_dvec3();

@@ -269,7 +269,7 @@ impl Light {
                         .map(|s| LightSample { covers: false, ..s }),
                     None => {
                         let (bu, bv) = uniform_triangle(u.0, u.1);
-                        let q = a * (1.0 - bu - bv) + b * bu + c * bv;
+                        let q = crate::geometry::triangle::point_at(a, b, c, bu, bv);
                         area_sample(p, q, n, magnitude(&[a, b, c]), *radiance, 1.0 / area)
                     }
                 };

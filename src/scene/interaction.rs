@@ -61,14 +61,7 @@ impl Interaction {
                 let twice_area = 2.0 * (0.5 * cross.length()) as f32;
                 let (u, v) = away_from_edges(a, b, c, u, v, mag, twice_area);
                 let w = 1.0 - u - v;
-                // Interpolated from a vertex along the edges: where the
-                // vertices share a coordinate (an axis-aligned wall) it
-                // comes out exact, and elsewhere the error scales with the
-                // edges, not with the coordinates. As a·w + b·u + c·v it was
-                // ~3.5 ulps of the largest coordinate (pbrt's bound), and
-                // spawned rays re-hit their own triangle from 1 ulp off
-                // (`sampling::OFFSET_ULPS`).
-                let p = a + (b - a) * u + (c - a) * v;
+                let p = crate::geometry::triangle::point_at(a, b, c, u, v);
                 let ng = cross.normalize_or_zero().as_vec3();
                 let [na, nb, nc] = tri.map(|i| m.normals[i as usize]);
                 let ns = (na * w + nb * u + nc * v).normalize_or_zero();
