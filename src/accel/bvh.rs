@@ -1,5 +1,6 @@
 //! The native backend's build: binned SAH splits of primitive sets, which
-//! `wide` applies to build its W-wide tree directly.
+//! `wide` applies to build its W-wide tree directly; spatial splits
+//! (`spatial`) where a reference budget is given, which by default it is not.
 //!
 //! Box tests (in `wide`) follow Ize (2013): the far slab distance is enlarged
 //! by `ROBUST_SCALE` = 1 + 2*gamma(3), so rounding can never cull a box the ray
@@ -11,6 +12,7 @@ use glam::Vec4;
 use rayon::prelude::*;
 
 mod partition;
+mod spatial;
 use partition::partition;
 
 /// At most this many primitives per leaf; below it the SAH decides.
@@ -98,6 +100,11 @@ impl PrimRef {
     fn centroid2(&self) -> Vec4 {
         self.lo + self.hi
     }
+
+    /// This reference with box `b` (a spatial split's piece), same index.
+    fn with_box(&self, b: Box4) -> PrimRef {
+        PrimRef { lo: b.lo.truncate().extend(self.lo.w), hi: b.hi.truncate().extend(self.hi.w) }
+    }
 }
 
 /// A box in SIMD form; the `w` lanes carry no meaning.
@@ -150,35 +157,59 @@ impl Box4 {
 /// with their bounds. `split` divides it by the SAH, in place, into the two
 /// runs of its children; `wide` calls it until it has a node's `W` children,
 /// so the W-wide tree is built directly, with no binary tree in between.
+///
+/// `refs` reaches past the set's `n` references to the end of its spare
+/// room: the share of the build's reference budget that spatial splits
+/// below it may fill with duplicated references (`spatial`). Each split
+/// shares the room between the children in proportion to their sizes, as
+/// Embree's spatial-split builder does, moving the right child's run up.
 pub(super) struct BuildSet<'a> {
     refs: &'a mut [PrimRef],
+    n: usize,
     bounds: Box4,
     cbounds: Box4,
     /// Binary splits above this set.
     depth: usize,
     /// Index of `refs[0]` in the root's references.
     offset: usize,
+    /// The root's half area (in units of `scale`) when spatial splits are
+    /// allowed.
+    root: Option<RootArea>,
 }
 
-/// References to every primitive of `prims`, in order.
-pub(super) fn prim_refs(prims: &PrimTable) -> Vec<PrimRef> {
-    let mut refs: Vec<PrimRef> = super::huge::vec_with_capacity(prims.len());
+#[derive(Clone, Copy)]
+struct RootArea {
+    scale: f32,
+    area: f32,
+}
+
+/// References to every primitive of `prims`, in order, with room after
+/// them for `spare` more (duplicates made by spatial splits).
+pub(super) fn prim_refs(prims: &PrimTable, spare: usize) -> Vec<PrimRef> {
+    let mut refs: Vec<PrimRef> = super::huge::vec_with_capacity(prims.len() + spare);
     prims.par_map(&mut refs, |i, p| PrimRef::new(&p.bounds(), i));
+    if let Some(&first) = refs.first() {
+        refs.resize(prims.len() + spare, first);
+    }
     refs
 }
 
 impl<'a> BuildSet<'a> {
-    /// The root set over all of `refs`; `None` when there are none.
-    pub(super) fn root(refs: &'a mut [PrimRef]) -> Option<BuildSet<'a>> {
-        if refs.is_empty() {
+    /// The root set over the first `n` of `refs` (the rest is spare room
+    /// for spatial splits, which are made only if there is any); `None`
+    /// when there are none.
+    pub(super) fn root(refs: &'a mut [PrimRef], n: usize) -> Option<BuildSet<'a>> {
+        if n == 0 {
             return None;
         }
-        let (bounds, cbounds) = ref_bounds(refs);
-        Some(BuildSet { refs, bounds, cbounds, depth: 0, offset: 0 })
+        let (bounds, cbounds) = ref_bounds(&refs[..n]);
+        let scale = area_scale(&bounds);
+        let root = (refs.len() > n).then(|| RootArea { scale, area: bounds.half_area_scaled(scale).max(f32::MIN_POSITIVE) });
+        Some(BuildSet { refs, n, bounds, cbounds, depth: 0, offset: 0, root })
     }
 
     pub(super) fn len(&self) -> usize {
-        self.refs.len()
+        self.n
     }
 
     pub(super) fn bounds(&self) -> Aabb {
@@ -191,7 +222,7 @@ impl<'a> BuildSet<'a> {
 
     /// The primitives' indices, in the set's order.
     pub(super) fn indices(&self) -> impl Iterator<Item = u32> + '_ {
-        self.refs.iter().map(|r| r.index())
+        self.refs[..self.n].iter().map(|r| r.index())
     }
 
     /// Where the set starts in the references `root` was given; they keep
@@ -200,25 +231,42 @@ impl<'a> BuildSet<'a> {
         self.offset
     }
 
-    /// The two children by binned SAH, or `Err(self)` when this set is a
-    /// leaf: at most `LEAF_ALWAYS` primitives, or at most `MAX_LEAF` that
-    /// the SAH prefers to test together.
-    pub(super) fn split(self) -> Result<(BuildSet<'a>, BuildSet<'a>), BuildSet<'a>> {
-        let n = self.refs.len();
+    /// The two children by binned SAH (object or, where it pays and the
+    /// budget allows, spatial), or `Err(self)` when this set is a leaf: at
+    /// most `LEAF_ALWAYS` primitives, or at most `MAX_LEAF` that the SAH
+    /// prefers to test together. `prims` gives spatial splits the
+    /// triangles to clip.
+    pub(super) fn split(self, prims: &PrimTable) -> Result<(BuildSet<'a>, BuildSet<'a>), BuildSet<'a>> {
+        let n = self.n;
         if n <= LEAF_ALWAYS {
             return Err(self);
         }
         // Past MAX_SAH_DEPTH the SAH could keep peeling one primitive at a
         // time off a pathological input; median splits bound the depth instead.
-        let split = if self.depth < MAX_SAH_DEPTH { find_split(self.refs, &self.bounds, &self.cbounds) } else { None };
-        if split.is_none() && n <= MAX_LEAF {
+        let object = if self.depth < MAX_SAH_DEPTH { find_split(&self.refs[..n], &self.bounds, &self.cbounds) } else { None };
+        let spatial = match (&object, self.root) {
+            (Some(o), Some(root)) if self.refs.len() > n && o.overlap * self.bounds.half_area_scaled(root.scale) > spatial::ALPHA * root.area => {
+                spatial::find(&self.refs[..n], prims, &self.bounds, o.scale, o.parent_area).filter(|s| s.cost < o.cost && s.left + s.right <= self.refs.len())
+            }
+            _ => None,
+        };
+        let cost = spatial.map(|s| s.cost).or(object.as_ref().map(|o| o.cost));
+        if n <= MAX_LEAF && cost.map_or(true, |c| c >= blocks(n)) {
             return Err(self);
         }
-        let BuildSet { refs, cbounds, depth, offset, .. } = self;
-        let sides = match split {
-            Some((axis, bin, bins)) => {
-                let left_of = Binning::new(&cbounds, bins).left_of(axis, bin);
-                let (m, (left, right)) = partition(refs, |r| left_of.test(r.centroid2()));
+        let BuildSet { refs, cbounds, depth, offset, root, .. } = self;
+        if let Some(s) = spatial {
+            let (nl, right_start, nr) = spatial::apply(refs, n, prims, &s);
+            let (l, r) = refs.split_at_mut(right_start);
+            let (lb, rb) = (ref_bounds(&l[..nl]), ref_bounds(&r[..nr]));
+            let left = BuildSet { refs: l, n: nl, bounds: lb.0, cbounds: lb.1, depth: depth + 1, offset, root };
+            let right = BuildSet { refs: r, n: nr, bounds: rb.0, cbounds: rb.1, depth: depth + 1, offset: offset + right_start, root };
+            return Ok((left, right));
+        }
+        let sides = match object {
+            Some(o) => {
+                let left_of = Binning::new(&cbounds, o.bins).left_of(o.axis, o.bin);
+                let (m, (left, right)) = partition(&mut refs[..n], |r| left_of.test(r.centroid2()));
                 if m == 0 || m == n {
                     None
                 } else {
@@ -231,11 +279,17 @@ impl<'a> BuildSet<'a> {
             // Too many primitives for one leaf and no SAH split (all centroids
             // equal, or too deep): split at the median of the widest axis.
             let axis = cbounds.aabb().largest_axis();
-            refs.select_nth_unstable_by(n / 2, |a, b| a.centroid2()[axis].total_cmp(&b.centroid2()[axis]));
-            (n / 2, ref_bounds(&refs[..n / 2]), ref_bounds(&refs[n / 2..]))
+            refs[..n].select_nth_unstable_by(n / 2, |a, b| a.centroid2()[axis].total_cmp(&b.centroid2()[axis]));
+            (n / 2, ref_bounds(&refs[..n / 2]), ref_bounds(&refs[n / 2..n]))
         });
-        let (l, r) = refs.split_at_mut(mid);
-        Ok((BuildSet { refs: l, bounds: left.0, cbounds: left.1, depth: depth + 1, offset }, BuildSet { refs: r, bounds: right.0, cbounds: right.1, depth: depth + 1, offset: offset + mid }))
+        // The left child's share of the spare room goes between the runs.
+        let spare = refs.len() - n;
+        let room = (spare as u64 * mid as u64 / n as u64) as usize;
+        if room > 0 {
+            refs.copy_within(mid..n, mid + room);
+        }
+        let (l, r) = refs.split_at_mut(mid + room);
+        Ok((BuildSet { refs: l, n: mid, bounds: left.0, cbounds: left.1, depth: depth + 1, offset, root }, BuildSet { refs: r, n: n - mid, bounds: right.0, cbounds: right.1, depth: depth + 1, offset: offset + mid + room, root }))
     }
 }
 
@@ -362,9 +416,37 @@ impl<const N: usize> Bins<N> {
     }
 }
 
-/// Best binned-SAH split as `(axis, last bin of the left side, bins)`, or
-/// `None` when making a leaf is cheaper (only allowed for small nodes).
-fn find_split(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<(usize, usize, usize)> {
+/// The best binned-SAH object split of a set: centroids in bins up to
+/// `bin` (of `bins`) on `axis` go left. `cost` is in units of one block
+/// test, with areas measured in units of `scale` (`parent_area` the set's
+/// own); `overlap` is the part of the set's area where the two sides'
+/// boxes overlap (spatial splits are tried where it is large).
+struct ObjectSplit {
+    axis: usize,
+    bin: usize,
+    bins: usize,
+    cost: f32,
+    overlap: f32,
+    scale: f32,
+    parent_area: f32,
+}
+
+/// A power of two near 1 / (the box's largest extent): exact, so the
+/// costs (and the tree) are those of the unscaled arithmetic wherever that
+/// did not overflow.
+fn area_scale(bounds: &Box4) -> f32 {
+    let size = (bounds.hi - bounds.lo).truncate().max_element();
+    let exp = (size.to_bits() >> 23) & 0xff;
+    if size > 0.0 && exp < 254 {
+        f32::from_bits((254 - exp) << 23)
+    } else {
+        1.0
+    }
+}
+
+/// Best binned-SAH object split, or `None` when the centroids do not
+/// divide (all in one bin on every axis).
+fn find_split(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<ObjectSplit> {
     match bins_for(refs.len()) {
         4 => find_split_in::<4>(refs, bounds, cbounds),
         8 => find_split_in::<8>(refs, bounds, cbounds),
@@ -373,13 +455,9 @@ fn find_split(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<(usize,
     }
 }
 
-fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<(usize, usize, usize)> {
+fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<ObjectSplit> {
     let n = refs.len();
-    let size = (bounds.hi - bounds.lo).truncate().max_element();
-    // A power of two near 1/size: exact, so the costs (and the tree) are
-    // those of the unscaled arithmetic wherever that did not overflow.
-    let exp = (size.to_bits() >> 23) & 0xff;
-    let scale = if size > 0.0 && exp < 254 { f32::from_bits((254 - exp) << 23) } else { 1.0 };
+    let scale = area_scale(bounds);
     let parent_area = bounds.half_area_scaled(scale).max(f32::MIN_POSITIVE);
     let extent = cbounds.hi - cbounds.lo;
     let binning = Binning::new(cbounds, N);
@@ -417,10 +495,14 @@ fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4
             }
         }
     }
-    match best {
-        Some((_, _, cost)) if n <= MAX_LEAF && cost >= blocks(n) => None,
-        other => other.map(|(axis, bin, _)| (axis, bin, N)),
-    }
+    let (axis, bin, cost) = best?;
+    // The chosen sides' boxes, for their overlap.
+    let (boxes, split) = (&bins.boxes[axis], bin + 1);
+    let left = boxes[..split].iter().fold(Box4::EMPTY, |a, b| a.union(*b));
+    let right = boxes[split..].iter().fold(Box4::EMPTY, |a, b| a.union(*b));
+    let both = Box4 { lo: left.lo.max(right.lo), hi: left.hi.min(right.hi) };
+    let overlap = both.half_area_scaled(scale) / parent_area;
+    Some(ObjectSplit { axis, bin, bins: N, cost, overlap, scale, parent_area })
 }
 
 #[cfg(test)]
@@ -437,9 +519,11 @@ mod tests {
         let at = [0.0, 0.02, 100.0, 100.02, 0.04];
         let refs_of = |n: usize| -> Vec<PrimRef> { (0..n).map(|i| PrimRef::new(&tiny(at[i]), i as u32)).collect() };
         let mut four = refs_of(LEAF_ALWAYS);
-        assert!(BuildSet::root(&mut four).unwrap().split().is_err(), "{LEAF_ALWAYS} primitives must make a leaf");
+        let shapes: Vec<crate::scene::Shape> = Vec::new();
+        let prims = PrimTable::new(&shapes);
+        assert!(BuildSet::root(&mut four, LEAF_ALWAYS).unwrap().split(&prims).is_err(), "{LEAF_ALWAYS} primitives must make a leaf");
         let mut five = refs_of(LEAF_ALWAYS + 1);
-        let (l, r) = BuildSet::root(&mut five).unwrap().split().ok().expect("five far-apart primitives must split");
+        let (l, r) = BuildSet::root(&mut five, LEAF_ALWAYS + 1).unwrap().split(&prims).ok().expect("five far-apart primitives must split");
         assert_eq!((l.len(), r.len()), (3, 2));
     }
 

@@ -89,7 +89,7 @@ struct Kid<'a> {
 /// The children of a wide node whose set split into `l` and `r`: split the
 /// child with the largest box again until `W` children (or only leaves)
 /// remain, keeping them in order, as collapsing the binary SAH tree would.
-fn gather<'a, const W: usize>(l: BuildSet<'a>, r: BuildSet<'a>) -> Vec<Kid<'a>> {
+fn gather<'a, const W: usize>(l: BuildSet<'a>, r: BuildSet<'a>, prims: &PrimTable) -> Vec<Kid<'a>> {
     let mut kids = Vec::with_capacity(W);
     kids.push(Kid { set: l, leaf: false });
     kids.push(Kid { set: r, leaf: false });
@@ -102,7 +102,7 @@ fn gather<'a, const W: usize>(l: BuildSet<'a>, r: BuildSet<'a>) -> Vec<Kid<'a>> 
             }
         }
         let Some((i, _)) = best else { break };
-        match kids.remove(i).set.split() {
+        match kids.remove(i).set.split(prims) {
             Ok((a, b)) => {
                 kids.insert(i, Kid { set: b, leaf: false });
                 kids.insert(i, Kid { set: a, leaf: false });
@@ -129,11 +129,11 @@ impl<const W: usize> Part<W> {
     /// depth first, leaves recorded in order; returns its child code.
     pub(super) fn build(&mut self, set: BuildSet, prims: &PrimTable) -> u32 {
         let n = set.len();
-        let (l, r) = match set.split() {
+        let (l, r) = match set.split(prims) {
             Ok(sides) => sides,
             Err(set) => return self.leaf(prims, &set),
         };
-        let kids = gather::<W>(l, r);
+        let kids = gather::<W>(l, r, prims);
         let idx = self.push_node();
         if n > PARALLEL_BUILD {
             // Leaves here, interior children as pieces, in parallel.

@@ -193,14 +193,28 @@ fn avx512_requested() -> bool {
     }
 }
 
+/// The references spatial splits may add, as a fraction of the scene's
+/// primitives (`PATHTRACER_NATIVE_SPLITS`, at most 4; default 0: none, as
+/// measured in `bvh::spatial`).
+fn split_budget() -> f64 {
+    std::env::var("PATHTRACER_NATIVE_SPLITS").ok().and_then(|v| v.parse::<f64>().ok()).filter(|b| b.is_finite() && *b >= 0.0).map_or(0.0, |b| b.min(4.0))
+}
+
 impl<const W: usize> WideBvh<W> {
     pub fn build(shapes: &[Shape]) -> Self {
+        Self::build_with_splits(shapes, split_budget())
+    }
+
+    /// The tree over `shapes` with spatial splits allowed to add up to
+    /// `budget` references per primitive (0: object splits only).
+    pub fn build_with_splits(shapes: &[Shape], budget: f64) -> Self {
         assert!(W == 4 || W == 8, "WideBvh supports widths 4 and 8");
         let prims = prims::PrimTable::new(shapes);
-        let mut refs = prim_refs(&prims);
+        let spare = (prims.len() as f64 * budget) as usize;
+        let mut refs = prim_refs(&prims, spare);
         let mut out = Arrays::<W>::default();
         let (mut root, mut root_area) = (EMPTY, 0.0);
-        if let Some(set) = BuildSet::root(&mut refs) {
+        if let Some(set) = BuildSet::root(&mut refs, prims.len()) {
             root_area = set.half_area() as f64;
             let mut part = layout::Part::with_room_for(prims.len());
             let code = part.build(set, &prims);

@@ -112,6 +112,57 @@ fn every_width_and_instruction_set_matches_brute_force() {
     }
 }
 
+/// With spatial splits the tree references some triangles from several
+/// leaves, each leaf's box bounding only its piece; every traversal must
+/// still find exactly brute force's hits. The scene adds what spatial
+/// splits are for: two large triangles under (and a long sliver through)
+/// the small ones.
+#[test]
+fn spatial_split_trees_match_brute_force() {
+    let mut shapes = shapes();
+    let big = TriangleMesh {
+        positions: vec![Vec3::new(-5.0, -1.2, -5.0), Vec3::new(5.0, -1.2, -5.0), Vec3::new(5.0, -1.2, 5.0), Vec3::new(-5.0, -1.2, 5.0), Vec3::new(-3.0, -2.0, 0.0), Vec3::new(3.0, 2.0, 0.1), Vec3::new(3.0, 2.01, 0.12)],
+        triangles: vec![[0, 1, 2], [0, 2, 3], [4, 5, 6]],
+        normals: Vec::new(),
+    };
+    shapes.push(Shape::Mesh(big));
+    let rays = rays(&shapes);
+    let brute = BruteForce::new(&shapes);
+    let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
+    let want_occ: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
+    let plain = WideBvh::<8>::build_with_splits(&shapes, 0.0);
+    let split = WideBvh::<8>::build_with_splits(&shapes, 0.5);
+    let refs = |b: &WideBvh<8>| b.ids.iter().filter(|id| id[0] != EMPTY).count() + b.spheres.len();
+    assert!(refs(&split) > refs(&plain), "no spatial split was made ({} references)", refs(&split));
+    assert!(refs(&split) as f64 <= 1.5 * refs(&plain) as f64, "past the budget: {} references for {}", refs(&split), refs(&plain));
+    let mut candidates: Vec<(&str, WideBvh<8>)> = vec![("default", split)];
+    let mut sse = WideBvh::<8>::build_with_splits(&shapes, 0.5);
+    sse.avx = false;
+    candidates.push(("SSE2", sse));
+    let mut interleaved = WideBvh::<8>::build_with_splits(&shapes, 0.5);
+    interleaved.interleave = interleaved.avx;
+    interleaved.stream_shadows = interleaved.avx;
+    candidates.push(("interleaved, shadow streams", interleaved));
+    for (name, b) in &candidates {
+        let mut hits = vec![None; rays.len()];
+        let mut occ = vec![false; rays.len()];
+        for coherent in [false, true] {
+            if coherent {
+                b.intersect_coherent(&rays, &mut hits);
+                b.occluded_coherent(&rays, &mut occ);
+            } else {
+                b.intersect_batch(&rays, &mut hits);
+                b.occluded_batch(&rays, &mut occ);
+            }
+            let bad = hits.iter().zip(&want).filter(|(a, b)| a != b).count();
+            let bad_occ = occ.iter().zip(&want_occ).filter(|(a, b)| a != b).count();
+            assert_eq!((bad, bad_occ), (0, 0), "{name} (coherent: {coherent}): closest-hit and occlusion mismatches against brute force");
+        }
+        let singles = rays.iter().zip(&want).filter(|(r, w)| b.intersect(r) != **w).count();
+        assert_eq!(singles, 0, "{name}: single-ray mismatches");
+    }
+}
+
 /// The SIMD kernels (SSE2 and AVX2 box tests, the SSE2 triangle group
 /// test) give exactly the bits of the scalar code the other targets run.
 #[test]
