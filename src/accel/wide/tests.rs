@@ -94,21 +94,27 @@ fn every_width_and_instruction_set_matches_brute_force() {
         eprintln!("note: this CPU has no AVX2; the AVX2 paths were not exercised");
     }
     for (name, b) in &candidates {
-        let mut hits = vec![None; rays.len()];
-        let mut occ = vec![false; rays.len()];
-        for (what, f) in [("batch", false), ("coherent", true)] {
-            if f {
-                b.intersect_coherent(&rays, &mut hits);
-                b.occluded_coherent(&rays, &mut occ);
-            } else {
-                b.intersect_batch(&rays, &mut hits);
-                b.occluded_batch(&rays, &mut occ);
-            }
-            let bad = hits.iter().zip(&want).filter(|(a, b)| a != b).count();
-            let bad_occ = occ.iter().zip(&want_occ).filter(|(a, b)| a != b).count();
-            assert_eq!((bad, bad_occ), (0, 0), "{name} {what}: closest-hit and occlusion mismatches against brute force");
-        }
+        assert_batches_match(name, b.as_ref(), &rays, &want, &want_occ);
         assert_eq!(b.intersect(&rays[100]), want[100]);
+    }
+}
+
+/// `b`'s batch and coherent calls give exactly the hits and occlusion
+/// answers `want` and `want_occ` (brute force's).
+fn assert_batches_match(name: &str, b: &dyn Traversal, rays: &[Ray], want: &[Option<Hit>], want_occ: &[bool]) {
+    let mut hits = vec![None; rays.len()];
+    let mut occ = vec![false; rays.len()];
+    for (what, f) in [("batch", false), ("coherent", true)] {
+        if f {
+            b.intersect_coherent(rays, &mut hits);
+            b.occluded_coherent(rays, &mut occ);
+        } else {
+            b.intersect_batch(rays, &mut hits);
+            b.occluded_batch(rays, &mut occ);
+        }
+        let bad = hits.iter().zip(want).filter(|(a, b)| a != b).count();
+        let bad_occ = occ.iter().zip(want_occ).filter(|(a, b)| a != b).count();
+        assert_eq!((bad, bad_occ), (0, 0), "{name} {what}: closest-hit and occlusion mismatches against brute force");
     }
 }
 
@@ -144,20 +150,7 @@ fn spatial_split_trees_match_brute_force() {
     interleaved.stream_shadows = interleaved.avx;
     candidates.push(("interleaved, shadow streams", interleaved));
     for (name, b) in &candidates {
-        let mut hits = vec![None; rays.len()];
-        let mut occ = vec![false; rays.len()];
-        for coherent in [false, true] {
-            if coherent {
-                b.intersect_coherent(&rays, &mut hits);
-                b.occluded_coherent(&rays, &mut occ);
-            } else {
-                b.intersect_batch(&rays, &mut hits);
-                b.occluded_batch(&rays, &mut occ);
-            }
-            let bad = hits.iter().zip(&want).filter(|(a, b)| a != b).count();
-            let bad_occ = occ.iter().zip(&want_occ).filter(|(a, b)| a != b).count();
-            assert_eq!((bad, bad_occ), (0, 0), "{name} (coherent: {coherent}): closest-hit and occlusion mismatches against brute force");
-        }
+        assert_batches_match(name, b, &rays, &want, &want_occ);
         let singles = rays.iter().zip(&want).filter(|(r, w)| b.intersect(r) != **w).count();
         assert_eq!(singles, 0, "{name}: single-ray mismatches");
     }
