@@ -197,32 +197,46 @@ fn chop(v: Option<&[Vec3; 3]>, r: &PrimRef, axis: usize, pos: &[f32; BINS + 1], 
         }
         return;
     };
-    // The crossing points at the slab's low plane (none at `b0`'s).
-    let mut low = Box4::EMPTY;
+    // The crossing points at the slab's low plane; a piece of a triangle
+    // (an earlier spatial split's reference) may cross `b0`'s too.
+    let mut low = plane_cut(v, axis, pos[b0]);
     for k in b0..=b1 {
-        let mut piece = low;
-        if k < b1 {
-            let c = pos[k + 1];
-            low = Box4::EMPTY;
-            for i in 0..3 {
-                let (p, q) = (v[i], v[(i + 1) % 3]);
-                if (p[axis] < c && q[axis] > c) || (p[axis] > c && q[axis] < c) {
-                    let (lo, hi) = crossing(p, q, axis, c);
-                    low.grow(lo);
-                    low.grow(hi);
-                }
-            }
-            piece = piece.union(low);
-        }
-        for p in v {
-            if p[axis] >= pos[k] && p[axis] <= pos[k + 1] {
-                piece.grow(p.extend(0.0));
-            }
-        }
-        if let Some(piece) = within(piece, r, axis, pos[k], pos[k + 1]) {
+        let high = plane_cut(v, axis, pos[k + 1]);
+        if let Some(piece) = within(slab_piece(v, axis, pos[k], pos[k + 1], low, high), r, axis, pos[k], pos[k + 1]) {
             emit(k, piece);
         }
+        low = high;
     }
+}
+
+/// The box of the points where triangle `v`'s edges cross the plane at
+/// `c` on `axis` (strictly; a vertex on the plane is `slab_piece`'s).
+#[inline]
+fn plane_cut(v: &[Vec3; 3], axis: usize, c: f32) -> Box4 {
+    let mut cut = Box4::EMPTY;
+    for i in 0..3 {
+        let (p, q) = (v[i], v[(i + 1) % 3]);
+        if (p[axis] < c && q[axis] > c) || (p[axis] > c && q[axis] < c) {
+            let (lo, hi) = crossing(p, q, axis, c);
+            cut.grow(lo);
+            cut.grow(hi);
+        }
+    }
+    cut
+}
+
+/// The box of triangle `v`'s part between `a` and `b` on `axis`, given
+/// the planes' cuts (`plane_cut`): the corners of that polygon are the cut
+/// points and the vertices between the planes.
+#[inline]
+fn slab_piece(v: &[Vec3; 3], axis: usize, a: f32, b: f32, cut_a: Box4, cut_b: Box4) -> Box4 {
+    let mut piece = cut_a.union(cut_b);
+    for p in v {
+        if p[axis] >= a && p[axis] <= b {
+            piece.grow(p.extend(0.0));
+        }
+    }
+    piece
 }
 
 /// Where edge `p`-`q` crosses the plane at `c` on `axis` (it must cross
@@ -254,25 +268,10 @@ fn within(piece: Box4, r: &PrimRef, axis: usize, a: f32, b: f32) -> Option<Box4>
 /// The box of the part of triangle `v` (or, for `None`, of `r`'s box)
 /// between `a` and `b` on `axis`, inside `r`'s box; `None` when empty.
 fn clip(v: Option<&[Vec3; 3]>, r: &PrimRef, axis: usize, a: f32, b: f32) -> Option<Box4> {
-    let mut piece = Box4::EMPTY;
-    match v {
-        None => piece = Box4::of(r),
-        Some(v) => {
-            for i in 0..3 {
-                let (p, q) = (v[i], v[(i + 1) % 3]);
-                if p[axis] >= a && p[axis] <= b {
-                    piece.grow(p.extend(0.0));
-                }
-                for c in [a, b] {
-                    if (p[axis] < c && q[axis] > c) || (p[axis] > c && q[axis] < c) {
-                        let (lo, hi) = crossing(p, q, axis, c);
-                        piece.grow(lo);
-                        piece.grow(hi);
-                    }
-                }
-            }
-        }
-    }
+    let piece = match v {
+        None => Box4::of(r),
+        Some(v) => slab_piece(v, axis, a, b, plane_cut(v, axis, a), plane_cut(v, axis, b)),
+    };
     within(piece, r, axis, a, b)
 }
 
@@ -411,7 +410,9 @@ mod tests {
     }
 
     /// `chop` gives every slab the piece `clip` gives it, with the
-    /// triangle's vertices on planes and off them.
+    /// triangle's vertices on planes and off them, for the whole triangle
+    /// and for pieces of it that it crosses the boxes of (where `chop` once
+    /// missed the cut at the box's own side).
     #[test]
     fn chop_equals_clip_slab_by_slab() {
         let grid = Grid::new(&b([0.0, -3.0, -5.0], [16.0, 12.0, 1.0e3]), BINS);
@@ -423,8 +424,11 @@ mod tests {
             let mut bb = Aabb::from_point(v[0]);
             bb.grow(v[1]);
             bb.grow(v[2]);
-            let r = PrimRef::new(&bb, 3);
-            for axis in 0..3 {
+            let whole = PrimRef::new(&bb, 3);
+            // Also pieces of the triangle, whose boxes it crosses: an earlier
+            // spatial split's references.
+            let pieces_of = |axis: usize, a: f32, b: f32| whole.with_box(clip(Some(&v), &whole, axis, a, b).unwrap());
+            for (r, axis) in [whole, pieces_of(0, 4.3, 12.0), pieces_of(1, -1.0, 5.5), pieces_of(2, 1.5, 600.0)].into_iter().flat_map(|r| (0..3).map(move |a| (r, a))) {
                 let (b0, b1) = grid.range(axis, r.lo[axis], r.hi[axis]);
                 let mut pieces = [None; BINS];
                 chop(Some(&v), &r, axis, &grid.pos[axis], b0, b1, |k, p| pieces[k] = Some((p.lo, p.hi)));
