@@ -241,11 +241,13 @@ impl<'a> BuildSet<'a> {
         if n <= LEAF_ALWAYS {
             return Err(self);
         }
+        // Spatial splits need room for their duplicates.
+        let room_for_spatial = self.root.filter(|_| self.refs.len() > n);
         // Past MAX_SAH_DEPTH the SAH could keep peeling one primitive at a
         // time off a pathological input; median splits bound the depth instead.
-        let object = if self.depth < MAX_SAH_DEPTH { find_split(&self.refs[..n], &self.bounds, &self.cbounds) } else { None };
-        let spatial = match (&object, self.root) {
-            (Some(o), Some(root)) if self.refs.len() > n && o.overlap * self.bounds.half_area_scaled(root.scale) > spatial::ALPHA * root.area => {
+        let object = if self.depth < MAX_SAH_DEPTH { find_split(&self.refs[..n], &self.bounds, &self.cbounds, room_for_spatial.is_some()) } else { None };
+        let spatial = match (&object, room_for_spatial) {
+            (Some(o), Some(root)) if o.overlap * self.bounds.half_area_scaled(root.scale) > spatial::ALPHA * root.area => {
                 spatial::find(&self.refs[..n], prims, &self.bounds, o.scale, o.parent_area).filter(|s| s.cost < o.cost && s.left + s.right <= self.refs.len())
             }
             _ => None,
@@ -420,7 +422,8 @@ impl<const N: usize> Bins<N> {
 /// `bin` (of `bins`) on `axis` go left. `cost` is in units of one block
 /// test, with areas measured in units of `scale` (`parent_area` the set's
 /// own); `overlap` is the part of the set's area where the two sides'
-/// boxes overlap (spatial splits are tried where it is large).
+/// boxes overlap (spatial splits are tried where it is large; 0 where
+/// `find_split` was not asked for it).
 struct ObjectSplit {
     axis: usize,
     bin: usize,
@@ -445,17 +448,19 @@ fn area_scale(bounds: &Box4) -> f32 {
 }
 
 /// Best binned-SAH object split, or `None` when the centroids do not
-/// divide (all in one bin on every axis).
-fn find_split(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<ObjectSplit> {
+/// divide (all in one bin on every axis). Its sides' `overlap` is measured
+/// only when asked for (`with_overlap`: spatial splits may follow), so the
+/// default build does not pay for it.
+fn find_split(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4, with_overlap: bool) -> Option<ObjectSplit> {
     match bins_for(refs.len()) {
-        4 => find_split_in::<4>(refs, bounds, cbounds),
-        8 => find_split_in::<8>(refs, bounds, cbounds),
-        16 => find_split_in::<16>(refs, bounds, cbounds),
-        _ => find_split_in::<32>(refs, bounds, cbounds),
+        4 => find_split_in::<4>(refs, bounds, cbounds, with_overlap),
+        8 => find_split_in::<8>(refs, bounds, cbounds, with_overlap),
+        16 => find_split_in::<16>(refs, bounds, cbounds, with_overlap),
+        _ => find_split_in::<32>(refs, bounds, cbounds, with_overlap),
     }
 }
 
-fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4) -> Option<ObjectSplit> {
+fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4, with_overlap: bool) -> Option<ObjectSplit> {
     let n = refs.len();
     let scale = area_scale(bounds);
     let parent_area = bounds.half_area_scaled(scale).max(f32::MIN_POSITIVE);
@@ -496,12 +501,16 @@ fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4
         }
     }
     let (axis, bin, cost) = best?;
-    // The chosen sides' boxes, for their overlap.
-    let (boxes, split) = (&bins.boxes[axis], bin + 1);
-    let left = boxes[..split].iter().fold(Box4::EMPTY, |a, b| a.union(*b));
-    let right = boxes[split..].iter().fold(Box4::EMPTY, |a, b| a.union(*b));
-    let both = Box4 { lo: left.lo.max(right.lo), hi: left.hi.min(right.hi) };
-    let overlap = both.half_area_scaled(scale) / parent_area;
+    let overlap = if with_overlap {
+        // The chosen sides' boxes, for their overlap.
+        let (boxes, split) = (&bins.boxes[axis], bin + 1);
+        let left = boxes[..split].iter().fold(Box4::EMPTY, |a, b| a.union(*b));
+        let right = boxes[split..].iter().fold(Box4::EMPTY, |a, b| a.union(*b));
+        let both = Box4 { lo: left.lo.max(right.lo), hi: left.hi.min(right.hi) };
+        both.half_area_scaled(scale) / parent_area
+    } else {
+        0.0
+    };
     Some(ObjectSplit { axis, bin, bins: N, cost, overlap, scale, parent_area })
 }
 
