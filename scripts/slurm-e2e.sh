@@ -11,7 +11,10 @@
 #   (b) with one task's renderer SIGKILLed and one node killed mid-run, the
 #       array still completes (requeue) and the merged images are identical;
 #   (c) merge refuses an incomplete and an overlapping set of partials, and
-#       the merge job names the missing parts and the sbatch line for them.
+#       the merge job names the missing parts and the sbatch line for them;
+#   (d) a part damaged on disk after its task finished is refused by name,
+#       and the re-render line the merge job prints restores the images
+#       byte for byte.
 # Every daemon is stopped by the PID recorded at its start; the script then
 # checks that nothing of the cluster is left running.
 #
@@ -247,9 +250,37 @@ state="$(wait_job "$mid2" 60)"
 grep -q "sbatch --parsable --requeue --array=2 " "$S/work/b/job/logs/merge-$mid2.out" || fail "(c) the failed merge job did not give the re-render line: $(cat "$S/work/b/job/logs/merge-$mid2.out")"
 log "(c) PASS: incomplete, duplicated and overlapping sets refused; the merge job lists part 2 and: $(grep -o 'sbatch --parsable --requeue --array=2 [^)]*' "$S/work/b/job/logs/merge-$mid2.out")"
 
+# ---------------------------------------------------------------- (d)
+# A part damaged on disk after its task finished (one bit of its pixel
+# records), beside the part still missing from (c): the merge job names the
+# damaged part, and the line it prints re-renders both; the merge that
+# follows writes images byte-identical to the local render.
+p1="$S/work/b/job/parts/part-1.ptp"
+size="$(stat -c %s "$p1")"
+byte="$(od -An -tu1 -j $((size - 1000)) -N1 "$p1" | tr -d ' ')"
+printf "$(printf '\\%03o' $((byte ^ 4)))" | dd of="$p1" bs=1 seek=$((size - 1000)) conv=notrunc status=none
+if "$pt" verify "${parts[0]}" "$p1" >"$S/work/d1.out" 2>"$S/work/d1.err"; then fail "(d) verify passed a damaged part"; fi
+grep -q "part-1.ptp: records damaged (checksum mismatch)" "$S/work/d1.err" || fail "(d) verify did not name the damaged part: $(cat "$S/work/d1.err")"
+grep -q "part-0.ptp: ok" "$S/work/d1.out" || fail "(d) verify did not pass the intact part: $(cat "$S/work/d1.out")"
+rm -f "$S/work/b/img.png" "$S/work/b/img_rate.png" "$S/work/b/img.exr" "$S/work/b/var.exr"
+mid3="$(sbatch --parsable "$S/work/b/job/merge.sh")"; mid3="${mid3%%;*}"
+state="$(wait_job "$mid3" 60)"
+[[ "$state" == FAILED ]] || fail "(d) the merge job with a damaged part ended $state"
+out3="$S/work/b/job/logs/merge-$mid3.out"
+grep -q "merge: part 1 is damaged: .*part-1.ptp: records damaged (checksum mismatch)" "$out3" || fail "(d) the merge job did not name the damaged part: $(cat "$out3")"
+redo="$(grep -o 'JID=.*' "$out3")"
+[[ "$redo" == *"--array=1,2 "* ]] || fail "(d) the re-render line does not cover parts 1 and 2: $redo"
+resubmitted="$(eval "$redo")"
+mid4="$(grep -o 'Submitted batch job [0-9]*' <<<"$resubmitted" | awk '{print $4}')"
+[[ -n "$mid4" ]] || fail "(d) running the printed line submitted no merge job: $resubmitted"
+state="$(wait_job "$mid4" 150)"
+[[ "$state" == COMPLETED ]] || fail "(d) the merge job after the re-render ended $state: $(cat "$S/work/b/job/logs/merge-$mid4.out" 2>/dev/null)"
+same_images "$S/work/local-b" "$S/work/b" || fail "(d) images merged after the re-render differ from the local render"
+log "(d) PASS: part 1 damaged on disk: verify named it; the merge job named it and printed '$redo'; run as printed, it re-rendered parts 1 and 2 and the merge job $mid4 wrote images byte-identical to the local render"
+
 # ---------------------------------------------------------------- teardown
 stop_all
 left="$(pgrep -a 'slurm|munge' || true)"
 [[ -z "$left" ]] || fail "processes left running: $left"
 log "teardown: every daemon stopped by its PID; no slurm or munge process left"
-echo "slurm-e2e: 3 passed, 0 failed"
+echo "slurm-e2e: 4 passed, 0 failed"

@@ -14,8 +14,9 @@
 # What is written to DIR (default: ./pt-job-<date>-<pid>): render.sh (the
 # array task: `set -euo pipefail`, the renderer run as a child, not exec'ed,
 # so a killed renderer makes the task exit 137, which a site's RequeueExit=137
-# requeues), merge.sh (checks that every part is there, lists the missing ones
-# with the sbatch line that re-renders just those, then merges), parts/, logs/.
+# requeues), merge.sh (checks that every part is there and intact with
+# `pathtracer verify`, lists the missing and damaged ones with the sbatch line
+# that re-renders just those, then merges), parts/, logs/.
 # Then it submits
 #   sbatch --parsable --requeue --array=0-(N-1)[%K] DIR/render.sh
 #   sbatch --parsable --dependency=afterany:ARRAY_ID DIR/merge.sh
@@ -91,13 +92,22 @@ cat > "$job_dir/merge.sh" <<EOF
 #SBATCH --chdir=$cwd
 # Merge the parts of a split render (written by scripts/slurm-render.sh).
 set -euo pipefail
-missing=()
+# Every part must be there and intact (pathtracer verify checks its
+# checksums); the others are listed with the line that re-renders them.
+missing=(); damaged=(); redo=()
 for ((i = 0; i < $n; i++)); do
-    [[ -s "$job_dir/parts/part-\$i.ptp" ]] || missing+=("\$i")
+    part="$job_dir/parts/part-\$i.ptp"
+    if [[ ! -s "\$part" ]]; then
+        missing+=("\$i"); redo+=("\$i")
+    elif ! why="\$($(q "$bin") verify "\$part" 2>&1 >/dev/null)"; then
+        echo "merge: part \$i is damaged: \$(head -n 1 <<<"\$why")" >&2
+        damaged+=("\$i"); redo+=("\$i")
+    fi
 done
-if ((\${#missing[@]})); then
-    list="\$(IFS=,; echo "\${missing[*]}")"
-    echo "merge: \${#missing[@]} of $n parts are missing: \$list" >&2
+if ((\${#redo[@]})); then
+    list="\$(IFS=,; echo "\${redo[*]}")"
+    if ((\${#missing[@]})); then echo "merge: \${#missing[@]} of $n parts are missing: \$(IFS=,; echo "\${missing[*]}")" >&2; fi
+    if ((\${#damaged[@]})); then echo "merge: \${#damaged[@]} of $n parts are damaged: \$(IFS=,; echo "\${damaged[*]}")" >&2; fi
     echo "merge: re-render just those, then merge again:" >&2
     echo "  JID=\\\$(sbatch --parsable --requeue --array=\$list $job_dir/render.sh) && sbatch --dependency=afterany:\\\$JID $job_dir/merge.sh" >&2
     exit 1

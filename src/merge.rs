@@ -3,8 +3,14 @@
 //! The set must be one render's (every header's settings equal) and cover
 //! its work exactly once: every sample index of every pixel (a sample
 //! split) or every tile (a tile split), with nothing missing and nothing
-//! twice. The sums are exact, so the merged images are the one-machine
-//! render's, byte for byte, whatever the number of parts.
+//! twice. Every part must be intact: its header checksum is checked when it
+//! is opened, its records' checksum as they are summed, and no image is
+//! written unless every part passed. The sums are exact, so the merged
+//! images are the one-machine render's, byte for byte, whatever the number
+//! of parts.
+//!
+//! `pathtracer verify` checks parts alone (one line per damaged file), for
+//! the Slurm merge job to name every part to render again.
 
 use crate::error::{Error, Result};
 use crate::partial::{Header, Partial, SplitKind};
@@ -149,6 +155,29 @@ pub fn merge(paths: &[PathBuf]) -> Result<Merged> {
     }
     let output = RenderOutput::from_sums(region.w, region.h, sums);
     Ok(Merged { header, output, rays, render_seconds, cpu_seconds, bad_samples })
+}
+
+/// The `verify` command: check each partial's integrity on its own (header
+/// and records checksums, sample counts). Prints a line per partial; fails
+/// when any is damaged.
+pub fn verify(paths: &[PathBuf]) -> Result<()> {
+    let mut bad = 0;
+    for p in paths {
+        match Partial::open(p).and_then(|o| {
+            let h = o.header.clone();
+            o.verify(p).map(|()| h)
+        }) {
+            Ok(h) => println!("{}: ok (part {}/{} of {}, {} split)", p.display(), h.index, h.count, h.get("scene").unwrap_or("?"), h.get("split").unwrap_or("?")),
+            Err(e) => {
+                eprintln!("{e}");
+                bad += 1;
+            }
+        }
+    }
+    if bad > 0 {
+        crate::bail!("{bad} of {} partials failed the check", paths.len());
+    }
+    Ok(())
 }
 
 /// The `merge` command: write the images the one-machine render writes.

@@ -163,6 +163,53 @@ fn merge_refuses_incomplete_duplicated_overlapping_and_foreign_sets() {
     assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
 }
 
+/// Damage after writing: a bit flipped in a part's header or in its pixel
+/// records makes `merge` refuse the set naming that part, and write nothing;
+/// `verify` names every damaged part and passes the intact ones; an old
+/// (version 1) partial is refused as such.
+#[test]
+fn damaged_partials_are_named_and_nothing_is_written() {
+    let d = scratch("damaged");
+    let args = ["-r", "40", "24", "-s", "4", "-m", "2", "--seed", "4"];
+    for i in 0..2 {
+        let p = format!("{i}/2");
+        let file = format!("p{i}.ptp");
+        let mut a: Vec<&str> = args.to_vec();
+        a.extend(["--part", &p, "--partial", &file]);
+        ok(&d, &a);
+    }
+    let intact = std::fs::read(d.join("p1.ptp")).unwrap();
+    let header_len = intact.windows(5).position(|w| w == b"\nend\n").unwrap() + 5;
+    let seed_line = intact.windows(5).position(|w| w == b"seed ").unwrap();
+    for (what, offset, expect) in [
+        ("a setting", seed_line + 5, "header damaged (checksum mismatch)"),
+        ("a record's sample count", header_len + 1, "records damaged (checksum mismatch)"),
+        ("the last record's Σx²", intact.len() - 3, "records damaged (checksum mismatch)"),
+    ] {
+        let mut b = intact.clone();
+        b[offset] ^= 0x10;
+        std::fs::write(d.join("p1.ptp"), &b).unwrap();
+        let e = refused(&d, &["merge", "p0.ptp", "p1.ptp", "-f", "out.png", "--exr", "out.exr"]);
+        assert!(e.contains(&format!("p1.ptp: {expect}")), "{what}: {e}");
+        assert!(!d.join("out.png").exists() && !d.join("out_rate.png").exists() && !d.join("out.exr").exists(), "{what}: a refused merge wrote an image");
+        let v = pathtracer(&d, &["verify", "p0.ptp", "p1.ptp"]);
+        let (out, err) = (String::from_utf8_lossy(&v.stdout), String::from_utf8_lossy(&v.stderr));
+        assert!(!v.status.success(), "{what}: verify passed a damaged part");
+        assert!(out.contains("p0.ptp: ok (part 0/2") && !out.contains("p1.ptp: ok"), "{what}: {out}");
+        assert!(err.contains(&format!("p1.ptp: {expect}")) && err.contains("1 of 2 partials failed the check"), "{what}: {err}");
+    }
+    // A version 1 partial: refused with the reason, not as damage.
+    let mut old = intact.clone();
+    old[..20].copy_from_slice(b"pathtracer-partial 1");
+    std::fs::write(d.join("p1.ptp"), &old).unwrap();
+    let e = refused(&d, &["merge", "p0.ptp", "p1.ptp", "-f", "out.png"]);
+    assert!(e.contains("p1.ptp: a version 1 partial (no checksums)"), "{e}");
+    std::fs::write(d.join("p1.ptp"), &intact).unwrap();
+    let v = ok(&d, &["verify", "p0.ptp", "p1.ptp"]);
+    assert_eq!(String::from_utf8_lossy(&v.stdout).matches(": ok (part").count(), 2);
+    ok(&d, &["merge", "p0.ptp", "p1.ptp", "-f", "out.png"]);
+}
+
 #[test]
 fn bad_part_flags_are_refused() {
     let d = scratch("flags");

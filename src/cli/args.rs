@@ -47,6 +47,13 @@ pub enum Command {
         #[arg(long, value_name = "FILE")]
         variance_exr: Option<PathBuf>,
     },
+    /// Check partials on their own (header and records checksums): one line
+    /// per partial, a non-zero exit when any is damaged.
+    Verify {
+        /// The partials to check
+        #[arg(required = true, value_name = "PARTIAL")]
+        partials: Vec<PathBuf>,
+    },
     /// Error of OpenEXR images against a reference: relMSE and relative bias.
     Compare {
         /// The reference image (linear OpenEXR)

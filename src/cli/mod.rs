@@ -55,6 +55,7 @@ pub fn main() -> ExitCode {
         Some(Command::Merge { partials, output, exr, variance_exr }) => {
             crate::merge::run(&partials, &output, exr.as_deref(), variance_exr.as_deref())
         }
+        Some(Command::Verify { partials }) => crate::merge::verify(&partials),
         Some(Command::Export { render, out }) => run_export(&render, &out),
         None if no_arguments => {
             // The demo render: CS184's defaults (1 spp, direct light only)
