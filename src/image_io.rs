@@ -114,19 +114,43 @@ pub fn write_exr(path: &Path, img: &Rgb) -> Result<()> {
     })
 }
 
+/// The most pixels an OpenEXR image may have for `read_exr` (16384 x
+/// 16384), and the most along a side: a header that claims more is refused
+/// before anything is allocated for it (a damaged 500-byte file once
+/// claimed 600 million pixels, and allocating them took seconds and gigabytes).
+pub const MAX_EXR_PIXELS: u64 = 1 << 28;
+pub const MAX_EXR_SIDE: u64 = 1 << 16;
+
 /// Read an RGB(A) OpenEXR written by us or a reference renderer.
 pub fn read_exr(path: &Path) -> Result<Rgb> {
     use exr::prelude::*;
+    let fail = |e: String| crate::error::Error::new(format!("{}: cannot read OpenEXR: {e}", path.display()));
+    // The headers first: sizes are checked before the pixels are read.
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| fail(e.to_string()))?;
+    for h in &meta.headers {
+        let (w, hgt) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
+        if w > MAX_EXR_SIDE || hgt > MAX_EXR_SIDE || w * hgt > MAX_EXR_PIXELS {
+            return Err(fail(format!("a {w}x{hgt} layer is larger than this renderer reads (at most {MAX_EXR_PIXELS} pixels, {MAX_EXR_SIDE} a side)")));
+        }
+    }
     let image = read_first_rgba_layer_from_file(
         path,
-        |res, _| Rgb::new(res.width() as u32, res.height() as u32),
+        // The pixels are allocated when the first one is decoded.
+        |res, _| Rgb { width: res.width() as u32, height: res.height() as u32, pixels: Vec::new() },
         |img: &mut Rgb, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
             let w = img.width as usize;
+            if img.pixels.is_empty() {
+                img.pixels = vec![Vec3::ZERO; w * img.height as usize];
+            }
             img.pixels[pos.y() * w + pos.x()] = Vec3::new(r, g, b);
         },
     )
-    .map_err(|e| crate::error::Error::new(format!("{}: cannot read OpenEXR: {e}", path.display())))?;
-    Ok(image.layer_data.channel_data.pixels)
+    .map_err(|e| fail(e.to_string()))?;
+    let mut img = image.layer_data.channel_data.pixels;
+    if img.pixels.is_empty() {
+        img.pixels = vec![Vec3::ZERO; img.width as usize * img.height as usize];
+    }
+    Ok(img)
 }
 
 #[cfg(test)]

@@ -8,6 +8,7 @@ pub mod camera;
 pub mod cli;
 pub mod error;
 pub mod export;
+pub mod fuzz;
 pub mod geometry;
 pub mod image_io;
 pub mod light;

@@ -16,6 +16,9 @@ pub struct Cli {
     pub command: Option<Command>,
     #[command(flatten)]
     pub render: RenderArgs,
+    /// No argument at all was given: the demo render (`cli::run`).
+    #[arg(skip)]
+    pub bare: bool,
 }
 
 #[derive(Subcommand, Debug)]

@@ -30,13 +30,38 @@ pub fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
-    let cli = match Cli::try_parse() {
-        Ok(c) => c,
+    match parse(std::env::args_os()) {
+        Ok(Some(cli)) => match run(cli) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("pathtracer: error: {e}");
+                ExitCode::FAILURE
+            }
+        },
+        Ok(None) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("pathtracer: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// Parse a command line (the program name first). `Ok(None)` when clap
+/// printed the help or the version; a bad command line is one line.
+pub fn parse<I, T>(args: I) -> Result<Option<Cli>>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let args: Vec<T> = args.into_iter().collect();
+    let bare = args.len() == 1;
+    match Cli::try_parse_from(args) {
+        Ok(c) => Ok(Some(Cli { bare, ..c })),
         Err(e) => {
             use clap::error::ErrorKind;
             if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
                 let _ = e.print();
-                return ExitCode::SUCCESS;
+                return Ok(None);
             }
             let text = e.render().to_string();
             // One line: clap's message up to its usage block, with the
@@ -44,12 +69,14 @@ pub fn main() -> ExitCode {
             let message = text.split("\n\nUsage").next().unwrap_or("invalid arguments");
             let joined = message.split_whitespace().collect::<Vec<_>>().join(" ");
             let first = joined.trim_start_matches("error: ");
-            eprintln!("pathtracer: error: {first} (see --help)");
-            return ExitCode::from(2);
+            Err(Error::new(format!("{first} (see --help)")))
         }
-    };
-    let no_arguments = std::env::args_os().len() == 1;
-    let result = match cli.command {
+    }
+}
+
+/// Run a parsed command line, as the binary does.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
         Some(Command::Bench(b)) => crate::bench::run(&b),
         Some(Command::Compare { reference, images }) => compare(&reference, &images),
         Some(Command::Merge { partials, output, exr, variance_exr }) => {
@@ -57,7 +84,7 @@ pub fn main() -> ExitCode {
         }
         Some(Command::Verify { partials }) => crate::merge::verify(&partials),
         Some(Command::Export { render, out }) => run_export(&render, &out),
-        None if no_arguments => {
+        None if cli.bare => {
             // The demo render: CS184's defaults (1 spp, direct light only)
             // would give a noisy, flat picture of the built-in scene.
             println!("no arguments: rendering the built-in scene with -s {DEMO_SPP} -m {DEMO_DEPTH}");
@@ -67,13 +94,6 @@ pub fn main() -> ExitCode {
             run_render(&r)
         }
         None => run_render(&cli.render),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("pathtracer: error: {e}");
-            ExitCode::FAILURE
-        }
     }
 }
 

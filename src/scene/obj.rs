@@ -28,7 +28,13 @@ pub fn parse(reader: &mut impl std::io::BufRead, name: &str, source: &str) -> Re
         mtllib.set(Some(p.display().to_string()));
         Err(tobj::LoadError::GenericFailure)
     })
-    .map_err(|e| Error::new(format!("{source}: not a valid OBJ file: {e}")))?;
+    .map_err(|e| {
+        let why = match e {
+            tobj::LoadError::ReadError => "a line is not UTF-8 text or cannot be read".to_string(),
+            other => other.to_string(),
+        };
+        Error::new(format!("{source}: not a valid OBJ file: {why}"))
+    })?;
     if let Some(lib) = mtllib.take() {
         eprintln!("pathtracer: {source}: OBJ materials ({lib}) are not read; every mesh renders with the default diffuse 0.5");
     }

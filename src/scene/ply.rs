@@ -101,11 +101,19 @@ impl PropertyAccess for Skipped {
     }
 }
 
+/// `ply-rs`'s message without its parser's debug dump: the line and what
+/// was wrong ("Line 3: Couldn't parse line. String: 'format ascii 9'").
+fn ply_error(e: &impl std::fmt::Display) -> String {
+    let text = e.to_string();
+    let kept: Vec<&str> = text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.contains("ParseError {")).collect();
+    kept.join(" ")
+}
+
 /// Parse a PLY stream; `source` names it in messages.
 pub fn parse(input: impl std::io::Read, name: &str, source: &str) -> Result<Scene> {
     let fail = |what: String| Error::new(format!("{source}: {what}"));
     let mut reader = Reader::new(std::io::BufReader::new(input));
-    let header = Parser::<Skipped>::new().read_header(&mut reader).map_err(|e| fail(format!("not a valid PLY header: {e}")))?;
+    let header = Parser::<Skipped>::new().read_header(&mut reader).map_err(|e| fail(format!("not a valid PLY header: {}", ply_error(&e))))?;
     for required in ["vertex", "face"] {
         if !header.elements.contains_key(required) {
             crate::bail!("{source}: no '{required}' element (a PLY mesh needs vertices and faces)");
@@ -116,7 +124,7 @@ pub fn parse(input: impl std::io::Read, name: &str, source: &str) -> Result<Scen
     let mut faces: Vec<Face> = Vec::new();
     // Elements come in header order; each is read (or skipped) in turn.
     for (_, element) in &header.elements {
-        let what = |e: ply_rs_bw::parser::ParseError| fail(format!("bad '{}' data: {e}", element.name));
+        let what = |e: ply_rs_bw::parser::ParseError| fail(format!("bad '{}' data: {}", element.name, ply_error(&e)));
         match element.name.as_str() {
             "vertex" => vertices = Parser::<Vertex>::new().read_payload_for_element(&mut reader, element, &header).map_err(what)?,
             "face" => faces = Parser::<Face>::new().read_payload_for_element(&mut reader, element, &header).map_err(what)?,
