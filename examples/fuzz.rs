@@ -14,6 +14,10 @@
 //! `target/fuzz-findings`), named by kind, class, seed input and case, to be
 //! made a regression test (`tests/fuzz/regressions/<kind>/`).
 
+/// Every allocation counted per thread, so a case's memory is its own.
+#[global_allocator]
+static ALLOC: pathtracer::fuzz::alloc::CountingAlloc = pathtracer::fuzz::alloc::CountingAlloc::new();
+
 use pathtracer::fuzz::{self, Kind, Outcome, Report};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};

@@ -5,6 +5,10 @@
 //! (`tests/fuzz/regressions/<kind>/<seed>--<what>.<ext>`) passes now.
 //! The long run is `cargo run --release --example fuzz -- --cases 1000000`.
 
+/// Every allocation counted per thread, so a case's memory is its own.
+#[global_allocator]
+static ALLOC: pathtracer::fuzz::alloc::CountingAlloc = pathtracer::fuzz::alloc::CountingAlloc::new();
+
 use pathtracer::fuzz::{self, Kind, Outcome};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;

@@ -129,6 +129,26 @@ fn ply_without_normals_and_with_vertex_index_lists_gets_computed_normals() {
     assert!(m.normals.iter().all(|n| (*n - Vec3::Y).length() < 1e-6), "{:?}", m.normals);
 }
 
+/// Counts in a PLY header are checked against the file's size before the
+/// reader reserves room for them (a damaged count of 2^32 faces once made
+/// it reserve 200 GB and be killed by the kernel).
+#[test]
+fn ply_counts_the_file_cannot_hold_are_refused() {
+    for format in ["ascii", "binary_little_endian", "binary_big_endian"] {
+        let good = ply_bytes(format);
+        let text = String::from_utf8_lossy(&good).into_owned();
+        let bad: Vec<u8> = if format == "ascii" {
+            text.replacen("element face 2", "element face 4294967296", 1).into_bytes()
+        } else {
+            let at = good.windows(14).position(|w| w == b"element face 2").unwrap();
+            [&good[..at], b"element face 4294967296".as_slice(), &good[at + 14..]].concat()
+        };
+        assert_ne!(bad, good, "{format}");
+        let e = ply::parse(Cursor::new(bad), "t", "t.ply").unwrap_err().0;
+        assert!(e.starts_with("t.ply: element 'face' announces 4294967296 entries"), "{format}: {e}");
+    }
+}
+
 #[test]
 fn scenes_beyond_what_f32_ray_arithmetic_carries_are_refused_by_every_loader() {
     let tri = |s: f32| format!("v 0 0 0\nv {s} 0 0\nv 0 {s} 0\nf 1 2 3\n");

@@ -14,6 +14,7 @@
 //! cases with a fixed seed (`tests/fuzz.rs`) and every input that ever
 //! failed (`tests/fuzz/regressions/`).
 
+pub mod alloc;
 pub mod mutate;
 pub mod targets;
 
@@ -41,8 +42,8 @@ pub enum Outcome {
     LeftOutput(String),
     /// Refused with a message that does not name the input.
     Unnamed(String),
-    /// The process's peak memory first passed [`MEMORY_BOUND`] during the
-    /// case (a size read from the input and believed).
+    /// The case's thread had more than [`MEMORY_BOUND`] live at once (a
+    /// size read from the input and believed); needs [`alloc::CountingAlloc`].
     Memory(String),
     /// The process died (counted by `examples/fuzz.rs`'s child processes).
     Crashed(String),
@@ -77,19 +78,9 @@ impl Outcome {
     }
 }
 
-/// The peak memory no case should push the process past: inputs are small,
-/// renders 8x6 pixels, so more means a size in the input was believed.
-pub const MEMORY_BOUND: u64 = 1 << 30;
-
-/// The process's peak resident memory so far, in bytes.
-pub fn peak_memory() -> u64 {
-    // SAFETY: getrusage only writes the struct it is given.
-    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
-    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
-        return 0;
-    }
-    u.ru_maxrss as u64 * 1024
-}
+/// The most memory a case may hold at once on its thread: inputs are
+/// small, renders 8x6 pixels, so more means a size in the input was believed.
+pub const MEMORY_BOUND: i64 = 1 << 30;
 
 /// A panic's message, from its payload.
 pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {

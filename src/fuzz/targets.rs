@@ -159,16 +159,14 @@ impl Workspace {
             }
         }
         args.extend(["-f".into(), img]);
-        let memory_before = super::peak_memory();
+        let live = super::alloc::mark();
         let result = std::panic::catch_unwind(|| crate::cli::parse(&args).and_then(|c| c.map_or(Ok(()), crate::cli::run)));
-        let memory_after = super::peak_memory();
+        let held = super::alloc::peak() - live;
         let left: Vec<String> = Self::entries(&self.dir).into_iter().filter(|n| *n != case_name && n != "out").collect();
         let written = Self::entries(&out);
         match result {
             Err(payload) => Outcome::Panicked(super::panic_message(payload.as_ref())),
-            _ if memory_before <= super::MEMORY_BOUND && memory_after > super::MEMORY_BOUND => {
-                Outcome::Memory(format!("peak memory rose from {} to {} MiB", memory_before >> 20, memory_after >> 20))
-            }
+            _ if held > super::MEMORY_BOUND => Outcome::Memory(format!("the case held {} MiB at once", held >> 20)),
             _ if !left.is_empty() => Outcome::LeftOutput(format!("files beside the input: {}", left.join(", "))),
             Ok(Ok(())) if written == ["img.png", "img_rate.png"] => Outcome::Rendered,
             Ok(Ok(())) => Outcome::LeftOutput(format!("a successful run wrote {written:?}")),

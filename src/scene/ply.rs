@@ -15,9 +15,31 @@ use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult};
 use std::path::Path;
 
 pub fn load_file(path: &Path) -> Result<Scene> {
-    let file = std::fs::File::open(path).map_err(|e| Error::new(format!("{}: cannot read: {e}", path.display())))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::new(format!("{}: cannot read: {e}", path.display())))?;
     let name = super::name_of(path);
-    parse(std::io::BufReader::new(file), &name, &path.display().to_string())
+    parse(bytes.as_slice(), &name, &path.display().to_string())
+}
+
+/// The fewest bytes one entry of `element` can take in the payload: its
+/// scalars' sizes and its lists' length fields in binary, a character and
+/// a separator per property in ASCII; at least one.
+fn min_entry_bytes(element: &ply_rs_bw::ply::ElementDef, encoding: ply_rs_bw::ply::Encoding) -> u64 {
+    use ply_rs_bw::ply::{Encoding, PropertyType, ScalarType};
+    let size = |t: &ScalarType| match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    };
+    let bytes: u64 = element
+        .properties
+        .values()
+        .map(|p| match (&p.data_type, encoding) {
+            (_, Encoding::Ascii) => 2,
+            (PropertyType::Scalar(t), _) | (PropertyType::List(t, _), _) => size(t),
+        })
+        .sum();
+    bytes.max(1)
 }
 
 /// One `vertex` element: position and, when the file has them, a normal.
@@ -110,10 +132,28 @@ fn ply_error(e: &impl std::fmt::Display) -> String {
 }
 
 /// Parse a PLY stream; `source` names it in messages.
-pub fn parse(input: impl std::io::Read, name: &str, source: &str) -> Result<Scene> {
+pub fn parse(mut input: impl std::io::Read, name: &str, source: &str) -> Result<Scene> {
     let fail = |what: String| Error::new(format!("{source}: {what}"));
-    let mut reader = Reader::new(std::io::BufReader::new(input));
+    let mut bytes = Vec::new();
+    input.read_to_end(&mut bytes).map_err(|e| fail(format!("cannot read: {e}")))?;
+    let mut reader = Reader::new(std::io::Cursor::new(bytes.as_slice()));
     let header = Parser::<Skipped>::new().read_header(&mut reader).map_err(|e| fail(format!("not a valid PLY header: {}", ply_error(&e))))?;
+    // The reader reserves room for every entry a header announces: a count
+    // the file cannot hold (a damaged "element face 4294967296" in 300
+    // bytes) is refused before it is believed.
+    let mut need = 0u64;
+    for (_, element) in &header.elements {
+        let per = min_entry_bytes(element, header.encoding);
+        need = need.saturating_add((element.count as u64).saturating_mul(per));
+        if need > bytes.len() as u64 {
+            crate::bail!(
+                "{source}: element '{}' announces {} entries of at least {per} bytes each, more than the file's {} bytes can hold (damaged header?)",
+                element.name,
+                element.count,
+                bytes.len()
+            );
+        }
+    }
     for required in ["vertex", "face"] {
         if !header.elements.contains_key(required) {
             crate::bail!("{source}: no '{required}' element (a PLY mesh needs vertices and faces)");
