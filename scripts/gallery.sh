@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates the README's gallery (docs/gallery): CS184's figures from our CLI.
+# Regenerates the gallery (docs/gallery.md, docs/gallery/): CS184's figures from our CLI.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -q

@@ -6,7 +6,7 @@
 # process per scene, each appending to the output as it finishes, so a run cut short (a lent
 # machine's time limit) keeps what it measured: the scenes go cheapest first.
 #
-#   scripts/measure-scaling.sh [OUT_DIR] [THREADS]     # defaults: docs/scaling, 1,2,4,8,16
+#   scripts/measure-scaling.sh [OUT_DIR] [THREADS]     # defaults: docs/benchmarks/scaling, 1,2,4,8,16
 #
 # Environment:
 #   PT=path/to/pathtracer  a binary built elsewhere (the lent 16-core machines have no Rust:
@@ -20,7 +20,7 @@
 # Scene names are looked up as `bench` does ($PATHTRACER_SCENES, ./scenes, ../shared/scenes/cs184).
 set -uo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-docs/scaling}
+out=${1:-docs/benchmarks/scaling}
 threads=${2:-1,2,4,8,16}
 scenes=${SCENES:-cow CBbunny maxplanck beetle arch:2M stadium:2M subdiv:bunny:1.5M sphere:1M arch:10M sphere:5M grass:2M}
 if [ -z "${PT:-}" ]; then

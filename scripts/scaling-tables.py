@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The README's thread-scaling tables, from the raw output of scripts/measure-scaling.sh.
+"""The thread-scaling tables of docs/benchmarks/scaling.md, from the raw output of scripts/measure-scaling.sh.
 
     scripts/scaling-tables.py RUN1_DIR_OR_CSV [RUN2 ...] [--peers PEERS_CSV] [--render RENDER_TXT]
 

@@ -237,8 +237,8 @@ fn depth_and_object_id_images_describe_the_first_hit() {
     assert!(checked > 100, "only {checked} back-wall pixels");
 }
 
-/// `pathtracer bench` writes the CSV and Markdown the README is generated
-/// from: one CSV row per scene, ray kind, thread count and backend, and the
+/// `pathtracer bench` writes the CSV and Markdown the documentation's tables
+/// are generated from: one CSV row per scene, ray kind, thread count and backend, and the
 /// native ÷ Embree and SAH tables when Embree is built in. Checks the shape
 /// of the output, not speeds.
 #[test]

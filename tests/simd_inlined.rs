@@ -7,7 +7,7 @@
 //! without being wrong, so no other test notices. It happened: a build with
 //! `--features peers` (a different split into code-generation units) left
 //! the packet set-up's loads out of line, and native camera rays read 56
-//! Mrays/s instead of 68 on CBbunny in the README's benchmark table.
+//! Mrays/s instead of 68 on CBbunny in the benchmark's table (docs/benchmarks/bench.md).
 //!
 //! The check reads the binary's symbol table with `nm` (binutils, which the
 //! Rust toolchain's linker needs anyway); without `nm` it fails, so it can

@@ -97,7 +97,19 @@ TIERS = {
 }
 
 
+def own_scene_cases(path, m, refs, scene_flags=()):
+    """The cases for a user's own scene (`validation/run TIER --scene FILE`): its radiance at
+    -m m against the chosen references, and its intersections (object ids, distances, normals)
+    against POV-Ray and Cycles."""
+    if not os.path.exists(path):
+        sys.exit(f"run_cases: scene {path} not found")
+    path = os.path.abspath(path)
+    return [radiance(path, m, refs, label=f"your scene at -m {m}", scene_flags=scene_flags), geometry(path)]
+
+
 def find_scene(name):
+    if os.path.isabs(name) and os.path.exists(name):
+        return name
     for d in [os.path.join(ROOT, "scenes"), os.path.join(HERE, "scenes"), os.path.join(ROOT, "..", "shared", "scenes", "cs184", "sky")]:
         p = os.path.join(d, name)
         if os.path.exists(p):

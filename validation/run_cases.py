@@ -35,7 +35,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 import stats  # noqa: E402
-from cases import BATCHES, TIERS, find_scene  # noqa: E402
+from cases import BATCHES, TIERS, find_scene, own_scene_cases  # noqa: E402
 from images import read_exr, to_png, write_png, write_zmap  # noqa: E402
 from metrics import equal_time_ratio, flip_error, from_renders, interp_loglog, ladder_curve, rel_mse  # noqa: E402
 from report import write_report  # noqa: E402
@@ -271,7 +271,7 @@ class Harness:
     # ---- cases ----
 
     def run_radiance(self, case, results):
-        name = os.path.splitext(case["scene"])[0]
+        name = os.path.splitext(os.path.basename(case["scene"]))[0]
         cid = f"{name}_m{case['m']}" + "".join(f.replace("-", "_") for f in case["flags"]) + case.get("tag", "")
         folder = self.fresh(cid)
         scene_args, key, ref_dir = self.export(case, folder)
@@ -329,7 +329,7 @@ class Harness:
         return 2.0 * albedo * radiance
 
     def run_adaptive(self, case, results):
-        name = os.path.splitext(case["scene"])[0]
+        name = os.path.splitext(os.path.basename(case["scene"]))[0]
         cid = f"{name}_m{case['m']}_adaptive"
         folder = self.fresh(cid)
         scene_args, key, ref_dir = self.export(case, folder)
@@ -430,7 +430,7 @@ class Harness:
         return getattr(self, rname)(ref_dir, key, m)
 
     def run_geometry(self, case, results):
-        name = os.path.splitext(case["scene"])[0]
+        name = os.path.splitext(os.path.basename(case["scene"]))[0]
         cid = f"{name}_geometry"
         folder = self.fresh(cid)
         scene_args, key, sc = self.export(case, folder)
@@ -475,14 +475,39 @@ class Harness:
         return folder
 
 
+def provenance():
+    """When, at which commit and on which CPU a run was made (for the documentation's tables)."""
+    git = lambda *a: subprocess.run(["git", "-C", ROOT, *a], capture_output=True, text=True)
+    commit = git("rev-parse", "--short", "HEAD").stdout.strip() or "?"
+    if git("diff", "--quiet", "HEAD", "--", "src", "native", "build.rs", "Cargo.toml").returncode != 0:
+        commit += "+local changes"
+    cpu = "?"
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((l.split(":", 1)[1].strip() for l in f if l.startswith("model name")), "?")
+    except OSError:
+        pass
+    return {"date": time.strftime("%Y-%m-%d"), "commit": commit, "cpu": f"{os.cpu_count()}-vCPU {cpu}"}
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("tier", choices=sorted(TIERS))
     ap.add_argument("--pathtracer", default=os.path.join(ROOT, "target", "release", "pathtracer"))
     ap.add_argument("--out", default=os.path.join(HERE, "out"))
     ap.add_argument("--only", default="", help="run only cases whose scene name (with its tag, e.g. CBspheres_lambertian.dae_lens) contains one of these comma-separated strings")
+    ap.add_argument("--scene", default="", help="run your own scene (.dae, .obj, .ply) instead of the tier's cases, at the tier's image size and sample counts")
+    ap.add_argument("-m", dest="max_depth", type=int, default=5, help="with --scene: the maximum path depth (default 5)")
+    ap.add_argument("--refs", default="mitsuba,cycles", help="with --scene: the references to compare against (mitsuba, cycles, povray; default mitsuba,cycles)")
+    ap.add_argument("--scene-flags", default="", help="with --scene: flags that change the scene, passed to the export too (e.g. \"-e map.exr -b 0.1 -d 4.5\")")
     args = ap.parse_args()
-    tier = TIERS[args.tier]
+    tier = dict(TIERS[args.tier])
+    if args.scene:
+        refs = [r for r in args.refs.split(",") if r]
+        unknown = [r for r in refs if r not in ("mitsuba", "cycles", "povray")]
+        if unknown or not refs:
+            sys.exit(f"run_cases: --refs {args.refs}: expected some of mitsuba, cycles, povray")
+        tier["cases"] = own_scene_cases(args.scene, args.max_depth, refs, args.scene_flags.split())
     hz = Harness(args, tier)
     results = []
     for case in tier["cases"]:
@@ -496,7 +521,7 @@ def main():
     refs = [f"mitsuba {mitsuba.__version__} scalar_rgb", sh([hz.blender, "--version"]).splitlines()[0] + " (Cycles)",
             next((l.strip() for l in (pov.stdout + pov.stderr).splitlines() if l.startswith("POV-Ray")), "POV-Ray")]
     summary = {"tier": args.tier, "pathtracer": sh([args.pathtracer, "--version"]).strip(), "references": refs, "backends": hz.backends, "results": results,
-               "all_passed": all(r["passed"] for r in results)}
+               "all_passed": all(r["passed"] for r in results), **provenance()}
     with open(os.path.join(args.out, "summary.json"), "w") as f:
         json.dump(summary, f, indent=2)
     write_report(args.out, summary)

@@ -1,12 +1,17 @@
 #!/usr/bin/env python3
-"""The README's "speed against error" material from validation runs' summary.json files:
-a markdown table of the equal-time relMSE ratios (ours ÷ each reference) per case and
-backend — one column per run, so two runs can be compared — with the fixed costs and the
-per-spp costs of every renderer, and an SVG plot of relMSE against sample time (ours,
-Cycles, Mitsuba) for chosen cases.
+"""The "speed against error" material from validation runs' summary.json files: a markdown
+table of the equal-time relMSE ratios (ours ÷ each reference) per case and backend — one column
+per run, so two runs can be compared — with the fixed costs and the per-spp costs of every
+renderer, an SVG plot of relMSE against sample time (ours, Cycles, Mitsuba) for chosen cases,
+and the documentation's tables.
 
-  validation/speed_vs_error.py SUMMARY.json [SUMMARY2.json ...] [--svg docs/speed-vs-error.svg]
-      [--cases CASE,CASE] [--markdown docs/speed-vs-error.md]
+  validation/speed_vs_error.py SUMMARY.json [SUMMARY2.json ...] [--svg docs/validation/speed-vs-error.svg]
+      [--cases CASE,CASE] [--markdown FILE] [--csv docs/validation/speed-vs-error.csv] [--paste]
+  validation/speed_vs_error.py --from-csv docs/validation/speed-vs-error.csv --paste
+
+--csv keeps the runs' ratios with their date, commit and CPU (the data the documentation's
+tables are made from); --paste writes the full table into docs/validation/speed-vs-error.md and
+the headline table into README.md, between their speed-vs-error markers.
 """
 import argparse
 import html
@@ -26,40 +31,104 @@ def load(path):
     return s, rows
 
 
-def ratio_table(runs):
-    """Markdown: one row per (case, backend, reference), one ratio column per run."""
-    keys = []
-    for _, rows in runs:
+def table_rows(runs):
+    """One dict per (case, backend, reference): the ratio of each run (None where a run has
+    none), whether the row is a `-H` one, and the last run's fixed and per-spp costs."""
+    out = {}
+    for i, (_, rows) in enumerate(runs):
         for r in rows:
             k = (r["case"], r["backend"], r["reference"])
-            if k not in keys:
-                keys.append(k)
-    head = "| case | ours | reference | " + " | ".join(f"run {i + 1}" for i in range(len(runs))) + " | fixed s (ours / ref) | ms per spp (ours / ref) |"
-    out = [head, "|" + "---|" * (head.count("|") - 1)]
-    for case, backend, ref in keys:
-        cells, fits = [], "– | –"
-        for _, rows in runs:
-            r = next((r for r in rows if (r["case"], r["backend"], r["reference"]) == (case, backend, ref)), None)
-            eq = r and r.get("equal_time_rel_mse_ratio")
-            cells.append(f"{eq['ratio']:.2f}" if eq else "–")
-            if r and r.get("timing") and r["timing"]["reference"]:
+            row = out.setdefault(k, {"case": k[0], "backend": k[1], "reference": k[2], "ratios": [None] * len(runs),
+                                     "hemisphere": "-H" in r.get("flags", []), "costs": None})
+            eq = r.get("equal_time_rel_mse_ratio")
+            row["ratios"][i] = eq["ratio"] if eq else None
+            if r.get("timing") and r["timing"]["reference"]:
                 t = r["timing"]
-                fits = (f"{t['ours']['fixed_seconds']:.3f} / {t['reference']['fixed_seconds']:.3f} | "
-                        f"{1e3 * t['ours']['seconds_per_spp']:.2f} / {1e3 * t['reference']['seconds_per_spp']:.2f}")
-        out.append(f"| {case} | {backend} | {ref} | " + " | ".join(cells) + f" | {fits} |")
+                row["costs"] = (t["ours"]["fixed_seconds"], t["reference"]["fixed_seconds"], 1e3 * t["ours"]["seconds_per_spp"], 1e3 * t["reference"]["seconds_per_spp"])
+    return list(out.values())
+
+
+def provenance(runs):
+    """The runs' date, commit, CPU and tier, from their summary.json."""
+    s = runs[-1][0]
+    return {"date": s.get("date", "?"), "commit": s.get("commit", "?"), "cpu": s.get("cpu", "?"), "tier": s.get("tier", "?"),
+            "runs": str(len(runs)), "source": "validation/speed_vs_error.py " + " ".join(os.path.basename(p) for p in s.get("_paths", []))}
+
+
+def write_csv(path, rows, meta):
+    with open(path, "w") as f:
+        f.write("# " + "; ".join(f"{k}={v}" for k, v in meta.items()) + "\n")
+        runs = len(rows[0]["ratios"]) if rows else 0
+        f.write("case,backend,reference,hemisphere," + ",".join(f"run{i + 1}" for i in range(runs)) + ",fixed_s_ours,fixed_s_ref,ms_per_spp_ours,ms_per_spp_ref\n")
+        for r in rows:
+            ratios = ["" if x is None else f"{x:.4f}" for x in r["ratios"]]
+            costs = ["", "", "", ""] if r["costs"] is None else [f"{c:.4f}" for c in r["costs"]]
+            f.write(",".join([r["case"], r["backend"], r["reference"], "1" if r["hemisphere"] else "0"] + ratios + costs) + "\n")
+
+
+def read_csv(path):
+    with open(path) as f:
+        lines = [l.rstrip("\n") for l in f if l.strip()]
+    meta = dict(kv.split("=", 1) for kv in lines[0].lstrip("# ").split("; "))
+    head = lines[1].split(",")
+    nruns = sum(1 for h in head if h.startswith("run"))
+    rows = []
+    for line in lines[2:]:
+        c = line.split(",")
+        costs = c[4 + nruns:8 + nruns]
+        rows.append({"case": c[0], "backend": c[1], "reference": c[2], "hemisphere": c[3] == "1",
+                     "ratios": [float(x) if x else None for x in c[4:4 + nruns]],
+                     "costs": None if not costs[0] else tuple(float(x) for x in costs)})
+    return rows, meta
+
+
+def ratio_table(rows):
+    """Markdown: one row per (case, backend, reference), one ratio column per run."""
+    nruns = len(rows[0]["ratios"]) if rows else 0
+    head = "| case | ours | reference | " + " | ".join(f"run {i + 1}" for i in range(nruns)) + " | fixed s (ours / ref) | ms per spp (ours / ref) |"
+    out = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        cells = ["–" if x is None else f"{x:.2f}" for x in r["ratios"]]
+        c = r["costs"]
+        fits = "– | –" if c is None else f"{c[0]:.3f} / {c[1]:.3f} | {c[2]:.2f} / {c[3]:.2f}"
+        out.append(f"| {r['case']} | {r['backend']} | {r['reference']} | " + " | ".join(cells) + f" | {fits} |")
     return "\n".join(out)
 
 
-def agreement(runs, tolerance=0.2, goal=0.5):
+def headline_table(rows, meta, goal=0.5):
+    """The README's table: native ÷ Cycles and ÷ Mitsuba per case, the worst of the runs
+    (`-H` rows aside), and how many rows of every backend meet the goal."""
+    cases = list(dict.fromkeys(r["case"] for r in rows if not r["hemisphere"]))
+    worst = lambda r: max(x for x in r["ratios"] if x is not None) if any(x is not None for x in r["ratios"]) else None
+    cell = lambda case, ref: next((f"{worst(r):.2f}" for r in rows if r["case"] == case and r["backend"] == "native" and r["reference"] == ref and worst(r) is not None), "–")
+    out = [f"Equal-time relMSE, ours (native backend) ÷ reference, below 1 is better; the worse of {meta['runs']} {meta['tier']}-tier runs, "
+           f"{meta['date']}, renderer at {meta['commit']}, {meta['cpu']} (`validation/speed_vs_error.py`):", "",
+           "| case | ÷ Cycles 3.4 | ÷ Mitsuba 3 |", "|---|---:|---:|"]
+    out += [f"| {c} | {cell(c, 'cycles')} | {cell(c, 'mitsuba')} |" for c in cases]
+    rated = [r for r in rows if not r["hemisphere"] and worst(r) is not None]
+    out += ["", f"{sum(1 for r in rated if worst(r) <= goal)} of {len(rated)} rows (both backends) at or below {goal} in every run."]
+    return "\n".join(out)
+
+
+def paste(path, name, text):
+    """Replace the text between `<!-- NAME:start -->` and `<!-- NAME:end -->` in `path`."""
+    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+    with open(path) as f:
+        doc = f.read()
+    if start not in doc or end not in doc:
+        sys.exit(f"speed_vs_error: {path}: the {name} markers are missing")
+    head, rest = doc.split(start, 1)
+    _, tail = rest.split(end, 1)
+    with open(path, "w") as f:
+        f.write(head + start + "\n" + text.strip() + "\n" + end + tail)
+    print(f"{path}: {name} table updated")
+
+
+def agreement(rows, tolerance=0.2, goal=0.5):
     """Markdown lines: how many rows (the `-H` ones aside: the naive estimator on purpose)
     agree between every pair of runs within `tolerance` (max ratio ÷ min ratio <= 1 +
     tolerance), the ones that do not, and the rows above `goal` in any run, unrounded."""
-    table = {}
-    for i, (_, rows) in enumerate(runs):
-        for r in rows:
-            eq = r.get("equal_time_rel_mse_ratio")
-            if eq and "-H" not in r.get("flags", []):
-                table.setdefault((r["case"], r["backend"], r["reference"]), [None] * len(runs))[i] = eq["ratio"]
+    table = {(r["case"], r["backend"], r["reference"]): r["ratios"] for r in rows if not r["hemisphere"]}
     both = {k: v for k, v in table.items() if all(x is not None for x in v)}
     apart = {k: max(v) / min(v) for k, v in both.items() if max(v) > (1 + tolerance) * min(v)}
     fmt = lambda k, v: f"{k[0]} {k[1]} ÷ {k[2]} " + " / ".join("–" if x is None else f"{x:.3f}" for x in v)
@@ -116,23 +185,50 @@ def svg(rows, cases, width=330, height=240):
     return "\n".join(parts)
 
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("summaries", nargs="+")
+    ap.add_argument("summaries", nargs="*")
+    ap.add_argument("--from-csv", help="take the runs from this CSV (written by --csv) instead of summary.json files")
     ap.add_argument("--svg", help="write the plot here")
     ap.add_argument("--cases", default="", help="comma-separated cases to plot (default: every case of the first run)")
     ap.add_argument("--markdown", help="write the table here (default: print it)")
+    ap.add_argument("--csv", help="write the runs' ratios, costs, date, commit and CPU here")
+    ap.add_argument("--paste", action="store_true", help="paste the tables into docs/validation/speed-vs-error.md and README.md")
     args = ap.parse_args()
-    runs = [load(p) for p in args.summaries]
-    table = ratio_table(runs)
-    if len(runs) > 1:
-        table += "\n\n" + agreement(runs)
-    if args.markdown:
+    if bool(args.summaries) == bool(args.from_csv):
+        sys.exit("speed_vs_error: give summary.json files or --from-csv FILE (one of the two)")
+    if args.from_csv:
+        rows, meta = read_csv(args.from_csv)
+        runs = []
+    else:
+        runs = []
+        for p in args.summaries:
+            s, r = load(p)
+            s["_paths"] = args.summaries
+            runs.append((s, r))
+        rows, meta = table_rows(runs), provenance(runs)
+    table = ratio_table(rows)
+    if len(rows[0]["ratios"]) > 1:
+        table += "\n\n" + agreement(rows)
+    if args.csv:
+        write_csv(args.csv, rows, meta)
+    if args.paste:
+        intro = (f"{meta['runs']} {meta['tier']}-tier runs, {meta['date']}, renderer at {meta['commit']}, {meta['cpu']}; "
+                 "equal-time relMSE ratio ours ÷ reference (below 0.5 is the goal; `-H` rows are the naive estimator on purpose), "
+                 "with the fixed and per-spp costs of the last run (`validation/speed_vs_error.py`):")
+        paste(os.path.join(ROOT, "docs", "validation", "speed-vs-error.md"), "speed-vs-error", intro + "\n\n" + table)
+        paste(os.path.join(ROOT, "README.md"), "speed-vs-error", headline_table(rows, meta))
+    elif args.markdown:
         with open(args.markdown, "w") as f:
             f.write(table + "\n")
     else:
         print(table)
     if args.svg:
+        if not runs:
+            sys.exit("speed_vs_error: --svg needs the summary.json files (the CSV has no curves)")
         rows = runs[0][1]
         cases = [c for c in args.cases.split(",") if c] or list(dict.fromkeys(r["case"] for r in rows))
         doc = svg(rows, cases)

@@ -35,6 +35,21 @@ pub fn unavailable_reason() -> &'static str {
     env!("PATHTRACER_EMBREE_STATUS")
 }
 
+/// The Embree version this build's backend runs ("Embree 3.13.5"), or why
+/// there is none.
+pub fn version_string() -> String {
+    #[cfg(has_embree)]
+    {
+        // SAFETY: a constant query of the shim.
+        let v = unsafe { ffi::pt_embree_version() };
+        format!("Embree {}.{}.{}", v / 10000, (v / 100) % 100, v % 100)
+    }
+    #[cfg(not(has_embree))]
+    {
+        unavailable_reason().to_string()
+    }
+}
+
 #[cfg(not(has_embree))]
 pub use absent::EmbreeBackend;
 #[cfg(has_embree)]

@@ -4,7 +4,7 @@
 //! everything. Both lobes are deltas; `sample` picks one with probability
 //! F and 1 − F, so the weight is the multiplier alone.
 //!
-//! Differences from CS184 (README's table):
+//! Differences from CS184 (docs/guide/cs184-users.md's table):
 //! * exact Fresnel, not Schlick at the outside angle: inside the glass near
 //!   the critical angle Schlick gives 0.035 where the truth is 0.43;
 //! * radiance scaling: transmitted radiance is multiplied by (η_i/η_t)²,

@@ -4,11 +4,30 @@ use crate::accel::BackendKind;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
+/// The examples at the end of `--help` (and of the man page).
+pub const EXAMPLES: &str = "\
+Examples:
+  pathtracer                                    render the built-in Cornell box (16 spp, -m 5)
+  pathtracer scene.dae -t 8 -s 64 -l 4 -m 5 -r 480 360 -f out.png
+  pathtracer scene.dae -s 256 -b 0.05 -d 4.5    depth of field (thin lens)
+  pathtracer bunny_unlit.dae -e studio.exr -s 64 -m 5
+  pathtracer scene.dae -s 1024 -a 64 0.05 -m 5 -f out.png   adaptive sampling (and out_rate.png)
+  pathtracer scene.dae --integrator normals     CS184's normal shading
+  pathtracer scene.dae --backend embree         same image, Embree's traversal
+  pathtracer scene.dae -s 256 --part 0/2 --partial p0.ptp   half of a split render...
+  pathtracer scene.dae -s 256 --part 1/2 --partial p1.ptp   ...the other half
+  pathtracer merge p0.ptp p1.ptp -f out.png     both merged: the one-machine image, byte for byte
+  pathtracer bench cow CBbunny                  BVH build and ray throughput per backend";
+
 #[derive(Parser, Debug)]
 #[command(
     name = "pathtracer",
     version,
     about = "Physically based path tracer for CS184 .dae scenes (native BVH, Embree or brute-force traversal)",
+    long_about = "Physically based path tracer for CS184 COLLADA scenes (and OBJ/PLY meshes), with interchangeable \
+ray-traversal backends: our own BVH (native), Intel Embree, and brute force (the oracle). Without a subcommand it \
+renders SCENE (the built-in Cornell box without one) to a PNG, taking CS184's flags.",
+    after_help = EXAMPLES,
     args_conflicts_with_subcommands = true
 )]
 pub struct Cli {
@@ -40,7 +59,7 @@ pub enum Command {
         /// The partials, one per part, in any order
         #[arg(required = true, value_name = "PARTIAL")]
         partials: Vec<PathBuf>,
-        /// Output PNG (also writes <FILE minus extension>_rate.png)
+        /// Output PNG, and its sample-rate image FILE_rate.png (FILE without its extension)
         #[arg(short = 'f', value_name = "FILE", required = true)]
         output: PathBuf,
         /// Also write the linear radiance as OpenEXR
@@ -65,6 +84,22 @@ pub enum Command {
         #[arg(required = true)]
         images: Vec<PathBuf>,
     },
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell)
+    /// to standard output, e.g. `pathtracer completions bash > /etc/bash_completion.d/pathtracer`.
+    Completions {
+        /// The shell
+        shell: clap_complete::Shell,
+    },
+    /// Write the man pages (pathtracer.1 and one per subcommand) into DIR.
+    Man {
+        /// Output folder
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+    },
+    /// Print the command-line reference as Markdown (docs/reference/cli.md is
+    /// this output; a test checks that it is current).
+    #[command(hide = true)]
+    CliReference,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -89,86 +124,86 @@ pub struct RenderArgs {
     /// Without a file, the built-in CBspheres_lambertian is rendered.
     pub scene: Option<PathBuf>,
     /// Render threads [default: all cores]
-    #[arg(short = 't', value_name = "N")]
+    #[arg(help_heading = "CS184 flags", short = 't', value_name = "N")]
     pub threads: Option<usize>,
     /// Camera rays per pixel (the maximum with -a) [default: 1]
-    #[arg(short = 's', value_name = "N")]
+    #[arg(help_heading = "CS184 flags", short = 's', value_name = "N")]
     pub spp: Option<u32>,
     /// Samples per area light; with several lights and --light-pick one,
     /// light samples per vertex, each picking one light [default: 1]
-    #[arg(short = 'l', value_name = "N")]
+    #[arg(help_heading = "CS184 flags", short = 'l', value_name = "N")]
     pub light_samples: Option<u32>,
     /// Maximum ray depth [default: 1]
-    #[arg(short = 'm', value_name = "N")]
+    #[arg(help_heading = "CS184 flags", short = 'm', value_name = "N")]
     pub max_depth: Option<u32>,
     /// 1: accumulate bounces 0..m; 0: output only bounce m [default: 1]
-    #[arg(short = 'o', value_name = "0|1")]
+    #[arg(help_heading = "CS184 flags", short = 'o', value_name = "0|1")]
     pub accumulate: Option<i64>,
     /// Uniform hemisphere sampling for direct light instead of light sampling
-    #[arg(short = 'H')]
+    #[arg(help_heading = "CS184 flags", short = 'H')]
     pub hemisphere: bool,
     /// Adaptive sampling: check every BATCH samples, stop at relative tolerance TOL
-    #[arg(short = 'a', num_args = 2, value_names = ["BATCH", "TOL"], allow_negative_numbers = true)]
+    #[arg(help_heading = "CS184 flags", short = 'a', num_args = 2, value_names = ["BATCH", "TOL"], allow_negative_numbers = true)]
     pub adaptive: Option<Vec<String>>,
     /// Frame size in pixels [default: 800 600]; keeps CS184's pixel focal length
-    #[arg(short = 'r', num_args = 2, value_names = ["W", "H"], allow_negative_numbers = true)]
+    #[arg(help_heading = "CS184 flags", short = 'r', num_args = 2, value_names = ["W", "H"], allow_negative_numbers = true)]
     pub resolution: Option<Vec<String>>,
     /// With -r: scale the 800x600 view to the new size instead of cropping it
-    #[arg(long, requires = "resolution")]
+    #[arg(help_heading = "Output", long, requires = "resolution")]
     pub keep_fov: bool,
-    /// Output PNG (also writes <FILE minus extension>_rate.png) [default: ./<scene>.png]
-    #[arg(short = 'f', value_name = "FILE")]
+    /// Output PNG, and its sample-rate image FILE_rate.png (FILE without its extension) [default: ./SCENE.png]
+    #[arg(help_heading = "CS184 flags", short = 'f', value_name = "FILE")]
     pub output: Option<PathBuf>,
     /// Load a CS184 camera settings file
-    #[arg(short = 'c', value_name = "FILE")]
+    #[arg(help_heading = "CS184 flags", short = 'c', value_name = "FILE")]
     pub camera: Option<PathBuf>,
     /// Render only the cell at X,Y (from the bottom-left) of size DX x DY
-    #[arg(short = 'p', num_args = 4, value_names = ["X", "Y", "DX", "DY"], allow_negative_numbers = true)]
+    #[arg(help_heading = "CS184 flags", short = 'p', num_args = 4, value_names = ["X", "Y", "DX", "DY"], allow_negative_numbers = true)]
     pub cell: Option<Vec<String>>,
     /// Environment light: a latitude-longitude OpenEXR map (CS184's -e)
-    #[arg(short = 'e', value_name = "FILE.exr")]
+    #[arg(help_heading = "CS184 flags", short = 'e', value_name = "FILE.exr")]
     pub environment: Option<PathBuf>,
     /// Thin-lens radius in scene units; 0 is a pinhole [default: 0]
-    #[arg(short = 'b', value_name = "RADIUS", allow_negative_numbers = true)]
+    #[arg(help_heading = "CS184 flags", short = 'b', value_name = "RADIUS", allow_negative_numbers = true)]
     pub lens_radius: Option<String>,
     /// Focal distance: the plane in focus, in scene units along the view axis [default: 4.7]
-    #[arg(short = 'd', value_name = "DIST", allow_negative_numbers = true)]
+    #[arg(help_heading = "CS184 flags", short = 'd', value_name = "DIST", allow_negative_numbers = true)]
     pub focal_distance: Option<String>,
     /// Ray traversal backend
-    #[arg(long, value_enum, default_value_t = BackendKind::Native)]
+    #[arg(help_heading = "Backends", long, value_enum, default_value_t = BackendKind::Native)]
     pub backend: BackendKind,
     /// What to compute per camera ray
-    #[arg(long, value_enum, default_value_t = IntegratorKind::Path)]
+    #[arg(help_heading = "Light transport", long, value_enum, default_value_t = IntegratorKind::Path)]
     pub integrator: IntegratorKind,
     /// Disable Russian roulette (paths then always run to -m bounces)
-    #[arg(long)]
+    #[arg(help_heading = "Light transport", long)]
     pub no_rr: bool,
     /// With -a: decide each pixel's sample count on pilot samples that are
     /// then discarded (unbiased; CS184's rule decides on the samples it keeps)
-    #[arg(long, requires = "adaptive")]
+    #[arg(help_heading = "Light transport", long, requires = "adaptive")]
     pub adaptive_pilot: bool,
     /// Seed of the per-pixel sample draws
-    #[arg(long, default_value_t = 0)]
+    #[arg(help_heading = "Light transport", long, default_value_t = 0)]
     pub seed: u64,
     /// Where each sample's random numbers come from: Owen-scrambled Sobol
     /// points (stratified) or independent uniform numbers
-    #[arg(long, value_enum, default_value_t = SamplerArg::Sobol)]
+    #[arg(help_heading = "Light transport", long, value_enum, default_value_t = SamplerArg::Sobol)]
     pub sampler: SamplerArg,
     /// How rectangular and spherical lights are sampled: uniformly in the
     /// solid angle they subtend, or (CS184's way, for A/B comparisons) by area
-    #[arg(long, value_enum, default_value_t = LightSamplingArg::SolidAngle)]
+    #[arg(help_heading = "Light transport", long, value_enum, default_value_t = LightSamplingArg::SolidAngle)]
     pub light_sampling: LightSamplingArg,
     /// How the hemisphere light is sampled at diffuse vertices: by the lune
     /// (the clipped cosine), or (CS184's way, for A/B comparisons) uniformly
     /// with MIS
-    #[arg(long, value_enum, default_value_t = SkySamplingArg::Lune)]
+    #[arg(help_heading = "Light transport", long, value_enum, default_value_t = SkySamplingArg::Lune)]
     pub sky_sampling: SkySamplingArg,
     /// How the environment map (-e) is sampled at reflecting vertices: by
     /// the map times a bound of the receiver's cosine (`light::env_product`)
     /// and, at glossy vertices of α ≤ 0.1, inside the lobe's cone
     /// (`light::env_lobe`); or for A/B comparisons by the cosine bound
     /// everywhere, or by the map alone (Cycles' and Mitsuba's way)
-    #[arg(long, value_enum, default_value_t = EnvSamplingArg::Product)]
+    #[arg(help_heading = "Light transport", long, value_enum, default_value_t = EnvSamplingArg::Product)]
     pub env_sampling: EnvSamplingArg,
     /// Share of a diffuse surface's bounce rays aimed at the scene's mirror,
     /// glass and metal objects reflecting at least half the light (a
@@ -176,34 +211,34 @@ pub struct RenderArgs {
     /// caustics through them are found more often; 0 for the cosine lobe
     /// alone (CS184's, Cycles' and Mitsuba's way). Up to 16 objects
     /// (`light::specular_guide`)
-    #[arg(long, value_name = "FRACTION", default_value_t = crate::light::specular_guide::DEFAULT_FRACTION)]
+    #[arg(help_heading = "Light transport", long, value_name = "FRACTION", default_value_t = crate::light::specular_guide::DEFAULT_FRACTION)]
     pub specular_guide: f32,
     /// With several lights: each light sample picks one, in proportion to
     /// an estimate of what each sends to the vertex (`light::pick`), or
     /// every light is sampled at every vertex. Scenes with an environment
     /// map, the hemisphere light, a non-rectangular emissive mesh or more
     /// than 8 lights always sample every light
-    #[arg(long, value_enum, default_value_t = LightPickArg::One)]
+    #[arg(help_heading = "Light transport", long, value_enum, default_value_t = LightPickArg::One)]
     pub light_pick: LightPickArg,
     /// Also write the linear radiance as OpenEXR
-    #[arg(long, value_name = "FILE")]
+    #[arg(help_heading = "Output", long, value_name = "FILE")]
     pub exr: Option<PathBuf>,
     /// Also write the per-pixel variance of the mean as OpenEXR
-    #[arg(long, value_name = "FILE")]
+    #[arg(help_heading = "Output", long, value_name = "FILE")]
     pub variance_exr: Option<PathBuf>,
     /// Write the camera settings (CS184's six-line format) used for this render
-    #[arg(long, value_name = "FILE")]
+    #[arg(help_heading = "Output", long, value_name = "FILE")]
     pub write_camera: Option<PathBuf>,
     /// Render only part I (from 0) of N of the work and write it to --partial
     /// FILE instead of images; `pathtracer merge` makes the images from all N
-    #[arg(long, value_name = "I/N", requires = "partial", allow_hyphen_values = true)]
+    #[arg(help_heading = "Split renders", long, value_name = "I/N", requires = "partial", allow_hyphen_values = true)]
     pub part: Option<String>,
     /// The partial file --part writes
-    #[arg(long, value_name = "FILE", requires = "part")]
+    #[arg(help_heading = "Split renders", long, value_name = "FILE", requires = "part")]
     pub partial: Option<PathBuf>,
     /// How --part divides the work: sample ranges of every pixel, or
     /// interleaved tiles [default: samples; tiles with -a]
-    #[arg(long, value_enum, requires = "part")]
+    #[arg(help_heading = "Split renders", long, value_enum, requires = "part")]
     pub split: Option<SplitArg>,
 }
 

@@ -2,6 +2,7 @@
 //! errors, the summary line.
 
 mod args;
+pub mod docs;
 
 pub use args::{Cli, Command, EnvSamplingArg, IntegratorKind, LightPickArg, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg};
 
@@ -13,7 +14,7 @@ use crate::light::Lights;
 use crate::render::{self, aov, normals::NormalShading, path::PathTracer, Adaptive, Integrator, Region, RenderSettings};
 use crate::scene::Bsdf;
 use crate::scene::{builtin, Scene};
-use clap::{Parser, ValueEnum};
+use clap::ValueEnum;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -53,9 +54,10 @@ where
     I: IntoIterator<Item = T>,
     T: Into<std::ffi::OsString> + Clone,
 {
+    use clap::FromArgMatches;
     let args: Vec<T> = args.into_iter().collect();
     let bare = args.len() == 1;
-    match Cli::try_parse_from(args) {
+    match docs::command().try_get_matches_from(args).and_then(|m| Cli::from_arg_matches(&m)) {
         Ok(c) => Ok(Some(Cli { bare, ..c })),
         Err(e) => {
             use clap::error::ErrorKind;
@@ -84,6 +86,19 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Some(Command::Verify { partials }) => crate::merge::verify(&partials),
         Some(Command::Export { render, out }) => run_export(&render, &out),
+        Some(Command::Completions { shell }) => {
+            docs::completions(shell, &mut std::io::stdout());
+            Ok(())
+        }
+        Some(Command::Man { out }) => {
+            let written = docs::man_pages(&out)?;
+            println!("wrote {} man pages: {}", written.len(), written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "));
+            Ok(())
+        }
+        Some(Command::CliReference) => {
+            print!("{}", docs::reference_markdown());
+            Ok(())
+        }
         None if cli.bare => {
             // The demo render: CS184's defaults (1 spp, direct light only)
             // would give a noisy, flat picture of the built-in scene.

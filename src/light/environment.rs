@@ -29,8 +29,8 @@
 //! (both come from the same corners), so the estimator is unbiased.
 //! Measured on a bunny under studio.exr (softboxes with sharp edges) at
 //! `-m 1`, 64 spp, 4 seeds, 256x192: uniform points in texels picked by the
-//! texel's integral had 1.8x the variance of Cycles 3.4 per sample; see the
-//! README.
+//! texel's integral had 1.8x the variance of Cycles 3.4 per sample; see
+//! docs/design/light-transport.md.
 
 use super::env_lobe::EnvLobe;
 use super::env_product::EnvProduct;

@@ -66,7 +66,7 @@ pub enum Light {
     /// CS184's "ambient": uniform radiance over the upper (+y) hemisphere of
     /// directions; `lune`: sampled by the lune at diffuse vertices.
     Hemisphere { radiance: Vec3, lune: bool },
-    /// A one-sided rectangle `corner + s*ex + t*ey`, s,t in [0,1], emitting
+    /// A one-sided rectangle `corner + s*ex + t*ey`, `s, t ∈ [0, 1]`, emitting
     /// towards `normal`; sampled by solid angle (`solid_angle`: the
     /// rectangle as `RectEmitter`, when its edges are orthogonal and that
     /// sampling is on) where it subtends enough, else by area.
@@ -412,7 +412,7 @@ impl Lights {
                 LightKind::Directional => {
                     // A Blender sun shines along its local -z; the light comes
                     // from +z. (CS184 transforms (0,0,-1) as a point instead,
-                    // translation included; see the README.)
+                    // translation included; see docs/guide/cs184-users.md.)
                     let to_light = xf.transform_vector3(Vec3::Z).normalize_or_zero();
                     if to_light == Vec3::ZERO {
                         crate::bail!("{}: directional light '{}' has a degenerate transform", scene.source, l.name);

@@ -132,7 +132,7 @@ impl PathTracer<'_> {
     /// the light by chance. At the path's last vertex the BSDF sample is then
     /// not traced at all when every light a ray can find is covered (at `-m 1`
     /// a third of the rays). Measured on CBspheres_lambertian at 256x192:
-    /// see the README's light-transport section.
+    /// see docs/design/light-transport.md.
     pub(super) fn alone(&self, bsdf: &Bsdf) -> bool {
         !self.hemisphere && matches!(bsdf, Bsdf::Diffuse(_))
     }

@@ -138,6 +138,18 @@ pub struct WideBvh<const W: usize> {
     order_work: [std::sync::atomic::AtomicU32; 2],
 }
 
+/// The SIMD level native traversal runs at on this CPU, with this
+/// process's `PATHTRACER_NATIVE_ISA`: "AVX2", "AVX2, AVX-512 packets" or "SSE2".
+pub fn simd_level() -> &'static str {
+    if avx512_requested() {
+        "AVX2, AVX-512 packets"
+    } else if avx_available() {
+        "AVX2"
+    } else {
+        "SSE2"
+    }
+}
+
 /// Whether this CPU runs the AVX2 box test (and the caller did not ask for SSE2).
 fn avx_available() -> bool {
     #[cfg(target_arch = "x86_64")]
