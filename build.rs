@@ -1,30 +1,36 @@
-//! Finds Embree, compiles the C shim in `native/` against it and generates its
-//! Rust bindings with bindgen. Without Embree (or without libclang for
-//! bindgen) the crate still builds: the `embree` backend then reports why it is
-//! missing. Nothing is ever downloaded.
+//! Finds Embree 3 and Embree 4 headers, compiles the C shim in `native/` once
+//! per major found (each build loads its library at run time, see
+//! `native/shim.c`), and generates the shim's Rust bindings with bindgen.
+//! Without a major's headers (or without libclang for bindgen) the crate still
+//! builds: that backend then reports why it is missing. Nothing is downloaded.
 //!
-//! Search order: `PATHTRACER_NO_EMBREE=1` disables it; `EMBREE_DIR` (with
-//! `include/` and `lib/`); pkg-config `embree4`, then `embree3`; then the
-//! standard include directories (Debian ships no .pc file for Embree 3).
+//! Search order per major: `PATHTRACER_NO_EMBREE` disables (`1` or `all`:
+//! both; `3` or `4`: that major); `EMBREE3_DIR` / `EMBREE4_DIR` (with
+//! `include/` and `lib/`), or `EMBREE_DIR` for whichever major its headers
+//! are; for Embree 4, `third_party/embree4` (what `scripts/install-deps.sh`
+//! installs); pkg-config `embree3` / `embree4`; the standard include folders
+//! (Debian ships no .pc file for Embree 3).
 
 use std::env;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 struct Found {
-    major: u32,
     include: Option<PathBuf>,
     lib_dir: Option<PathBuf>,
 }
 
-fn header_major(include: &Path) -> Option<u32> {
-    if include.join("embree4/rtcore.h").exists() {
-        Some(4)
-    } else if include.join("embree3/rtcore.h").exists() {
-        Some(3)
-    } else {
-        None
-    }
+fn has_header(include: &Path, major: u32) -> bool {
+    include.join(format!("embree{major}/rtcore.h")).exists()
+}
+
+fn header_version(include: Option<&Path>, major: u32) -> String {
+    let inc = include.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("/usr/include"));
+    let config = std::fs::read_to_string(inc.join(format!("embree{major}/rtcore_config.h"))).unwrap_or_default();
+    config
+        .lines()
+        .find_map(|l| l.strip_prefix("#define RTC_VERSION_STRING ").map(|v| v.trim().trim_matches('"').to_string()))
+        .unwrap_or_else(|| format!("{major}.x"))
 }
 
 fn pkg_config(name: &str) -> Option<(Option<PathBuf>, Option<PathBuf>)> {
@@ -45,58 +51,51 @@ fn pkg_config(name: &str) -> Option<(Option<PathBuf>, Option<PathBuf>)> {
     Some((inc, lib))
 }
 
-fn find_embree() -> Result<Found, String> {
-    if env::var_os("PATHTRACER_NO_EMBREE").is_some_and(|v| v != "0") {
+fn disabled(major: u32) -> bool {
+    env::var("PATHTRACER_NO_EMBREE").is_ok_and(|v| v == "1" || v == "all" || v.split(',').any(|m| m.trim() == major.to_string()))
+}
+
+fn find(major: u32) -> Result<Found, String> {
+    if disabled(major) {
         return Err("disabled at build time by PATHTRACER_NO_EMBREE".into());
     }
-    if let Some(dir) = env::var_os("EMBREE_DIR") {
+    let from_dir = |dir: PathBuf| Found { include: Some(dir.join("include")), lib_dir: Some(dir.join("lib")) };
+    if let Some(dir) = env::var_os(format!("EMBREE{major}_DIR")) {
         let dir = PathBuf::from(dir);
-        let inc = dir.join("include");
-        let major = header_major(&inc).ok_or_else(|| format!("EMBREE_DIR={} has no include/embree{{3,4}}/rtcore.h", dir.display()))?;
-        return Ok(Found { major, include: Some(inc), lib_dir: Some(dir.join("lib")) });
+        if !has_header(&dir.join("include"), major) {
+            return Err(format!("EMBREE{major}_DIR={} has no include/embree{major}/rtcore.h", dir.display()));
+        }
+        return Ok(from_dir(dir));
     }
-    for (name, major) in [("embree4", 4), ("embree3", 3)] {
-        if let Some((include, lib_dir)) = pkg_config(name) {
-            return Ok(Found { major, include, lib_dir });
+    if let Some(dir) = env::var_os("EMBREE_DIR").map(PathBuf::from).filter(|d| has_header(&d.join("include"), major)) {
+        return Ok(from_dir(dir));
+    }
+    if major == 4 {
+        let local = PathBuf::from(env::var("CARGO_MANIFEST_DIR").unwrap()).join("third_party/embree4");
+        if has_header(&local.join("include"), 4) {
+            return Ok(from_dir(local));
+        }
+    }
+    if let Some((include, lib_dir)) = pkg_config(&format!("embree{major}")) {
+        if include.as_deref().is_none_or(|i| has_header(i, major)) {
+            return Ok(Found { include, lib_dir });
         }
     }
     for inc in ["/usr/include", "/usr/local/include", "/opt/homebrew/include"] {
-        if let Some(major) = header_major(Path::new(inc)) {
+        if has_header(Path::new(inc), major) {
             let include = if inc == "/usr/include" { None } else { Some(PathBuf::from(inc)) };
             let lib_dir = include.as_ref().map(|i| i.with_file_name("lib"));
-            return Ok(Found { major, include, lib_dir });
+            return Ok(Found { include, lib_dir });
         }
     }
-    Err("Embree headers not found; install Embree (Debian/Ubuntu: apt-get install libembree-dev libclang-dev) and rebuild".into())
+    Err(if major == 3 {
+        "Embree 3 headers not found; install them (Debian/Ubuntu: apt-get install libembree-dev, or scripts/install-deps.sh) and rebuild".into()
+    } else {
+        "Embree 4 headers not found; run scripts/install-deps.sh (Embree 4 from PyPI's embreex4 wheel and the embree4-sys crate's headers into third_party/embree4) and rebuild".into()
+    })
 }
 
-fn main() {
-    println!("cargo:rerun-if-changed=build.rs");
-    println!("cargo:rerun-if-changed=native/shim.c");
-    println!("cargo:rerun-if-changed=native/shim.h");
-    for v in ["PATHTRACER_NO_EMBREE", "EMBREE_DIR", "PKG_CONFIG_PATH", "LIBCLANG_PATH"] {
-        println!("cargo:rerun-if-env-changed={v}");
-    }
-    println!("cargo:rustc-check-cfg=cfg(has_embree)");
-
-    let status = match build_shim() {
-        Ok(major) => {
-            println!("cargo:rustc-cfg=has_embree");
-            format!("Embree {major}")
-        }
-        Err(reason) => {
-            println!("cargo:warning=embree backend disabled: {reason}");
-            reason
-        }
-    };
-    println!("cargo:rustc-env=PATHTRACER_EMBREE_STATUS={status}");
-}
-
-fn build_shim() -> Result<u32, String> {
-    let found = find_embree()?;
-    let out = PathBuf::from(env::var("OUT_DIR").unwrap());
-
-    // Bindings first: if libclang is missing we stop before linking anything.
+fn bindings(out: &Path) -> Result<(), String> {
     let bindings = std::panic::catch_unwind(|| {
         bindgen::Builder::default()
             .header("native/shim.h")
@@ -108,18 +107,74 @@ fn build_shim() -> Result<u32, String> {
     })
     .map_err(|_| "bindgen could not load libclang; install libclang-dev (Debian/Ubuntu) and rebuild".to_string())?
     .map_err(|e| format!("bindgen failed on native/shim.h ({e}); install libclang-dev and rebuild"))?;
-    bindings.write_to_file(out.join("embree_shim.rs")).map_err(|e| format!("writing bindings: {e}"))?;
+    bindings.write_to_file(out.join("embree_shim.rs")).map_err(|e| format!("writing bindings: {e}"))
+}
 
+/// Compile the shim for `major`; returns the header version.
+fn compile(major: u32, found: &Found) -> Result<String, String> {
+    // The library files dlopen tries: the folder found first (absolute, so
+    // a project-local Embree needs no LD_LIBRARY_PATH), then the system's.
+    let soname = format!("libembree{major}.so.{major}");
+    let mut libs = Vec::new();
+    if let Some(dir) = &found.lib_dir {
+        let dir = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.clone());
+        libs.push(dir.join(&soname).display().to_string());
+    }
+    libs.push(soname);
     let mut cc = cc::Build::new();
-    cc.file("native/shim.c").flag_if_supported("-std=c11").opt_level(2).define("PT_EMBREE_MAJOR", found.major.to_string().as_str());
+    cc.file("native/shim.c")
+        .flag_if_supported("-std=gnu11")
+        .opt_level(2)
+        .define("PT_EMBREE_MAJOR", major.to_string().as_str())
+        .define("PT_API_FN", format!("pt_embree{major}_api").as_str())
+        .define("PT_EMBREE_LIBS", format!("\"{}\"", libs.join(":")).as_str());
     if let Some(inc) = &found.include {
         cc.include(inc);
     }
-    cc.try_compile("pt_embree_shim").map_err(|e| format!("compiling native/shim.c failed: {e}"))?;
-    // After the static shim library, so the linker resolves its Embree calls.
-    if let Some(lib) = &found.lib_dir {
-        println!("cargo:rustc-link-search=native={}", lib.display());
+    cc.try_compile(&format!("pt_embree{major}_shim")).map_err(|e| format!("compiling native/shim.c for Embree {major} failed: {e}"))?;
+    Ok(header_version(found.include.as_deref(), major))
+}
+
+fn main() {
+    println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-changed=native/shim.c");
+    println!("cargo:rerun-if-changed=native/shim.h");
+    println!("cargo:rerun-if-changed=third_party/embree4/VERSIONS");
+    for v in ["PATHTRACER_NO_EMBREE", "EMBREE_DIR", "EMBREE3_DIR", "EMBREE4_DIR", "PKG_CONFIG_PATH", "LIBCLANG_PATH"] {
+        println!("cargo:rerun-if-env-changed={v}");
     }
-    println!("cargo:rustc-link-lib=dylib=embree{}", found.major);
-    Ok(found.major)
+    for cfg in ["has_embree", "has_embree3", "has_embree4"] {
+        println!("cargo:rustc-check-cfg=cfg({cfg})");
+    }
+    let out = PathBuf::from(env::var("OUT_DIR").unwrap());
+    let found = [3, 4].map(|major| (major, find(major)));
+    let mut status = [String::new(), String::new()];
+    let any = found.iter().any(|(_, f)| f.is_ok());
+    // Bindings only where a shim will be built; libclang is needed for them.
+    let bound = if any { bindings(&out) } else { Err(String::new()) };
+    let mut built = 0;
+    for (k, (major, f)) in found.into_iter().enumerate() {
+        status[k] = match (f, &bound) {
+            (Err(why), _) => why,
+            (Ok(_), Err(why)) => why.clone(),
+            (Ok(found), Ok(())) => match compile(major, &found) {
+                Ok(version) => {
+                    println!("cargo:rustc-cfg=has_embree{major}");
+                    built += 1;
+                    format!("headers {version}")
+                }
+                Err(why) => why,
+            },
+        };
+        if !status[k].starts_with("headers") {
+            println!("cargo:warning=embree{major} backend disabled: {}", status[k]);
+        }
+    }
+    if built > 0 {
+        println!("cargo:rustc-cfg=has_embree");
+        println!("cargo:rustc-link-lib=dylib=dl");
+        println!("cargo:rustc-link-lib=dylib=pthread");
+    }
+    println!("cargo:rustc-env=PATHTRACER_EMBREE3_STATUS={}", status[0]);
+    println!("cargo:rustc-env=PATHTRACER_EMBREE4_STATUS={}", status[1]);
 }

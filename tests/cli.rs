@@ -146,8 +146,9 @@ fn identical_everywhere(d: &Path, tag: &str, base: &[&str]) {
     assert!(reference.pixels.iter().all(|p| p.is_finite()));
     assert!(reference.pixels.iter().any(|p| *p != glam::Vec3::ZERO), "{tag}: black image");
     let mut variants = vec![("t2", vec!["-t", "2", "--backend", "native"]), ("brute", vec!["-t", "2", "--backend", "brute"])];
-    if pathtracer::accel::embree::available() {
-        variants.push(("embree", vec!["-t", "2", "--backend", "embree"]));
+    for kind in common::embree_backends() {
+        let name: &'static str = if kind == pathtracer::accel::BackendKind::Embree3 { "embree3" } else { "embree4" };
+        variants.push((name, vec!["-t", "2", "--backend", name]));
     }
     for (name, extra) in variants {
         let args = with(&extra);
@@ -251,19 +252,25 @@ fn bench_writes_csv_and_markdown_tables() {
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("scene,rays,threads,backend,mrays_per_s"));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    let embree = pathtracer::accel::embree::available();
-    // Every contender: ours, Embree at both qualities, the peers built in.
-    let mut backends: Vec<&str> = if embree { vec!["native", "embree", "embree-high"] } else { vec!["native"] };
-    if cfg!(feature = "peers") {
-        backends.push("obvhs");
+    let embrees: Vec<String> = common::embree_backends().iter().map(|k| k.to_string()).collect();
+    let embree = !embrees.is_empty();
+    // Every contender: ours, each Embree at both qualities, the peers built in.
+    let mut backends: Vec<String> = vec!["native".into()];
+    for e in &embrees {
+        backends.push(e.clone());
+        backends.push(format!("{e}-high"));
     }
-    backends.push("brute");
+    if cfg!(feature = "peers") {
+        backends.push("obvhs".into());
+        backends.push("tinybvh".into());
+    }
+    backends.push("brute".into());
     let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let thread_counts = if threads > 1 { 2 } else { 1 };
     assert_eq!(rows.len(), 3 * backends.len() * thread_counts, "{csv}");
     for b in &backends {
         for kind in ["camera", "shadow", "random"] {
-            let row = rows.iter().find(|r| r[0] == "cow" && r[1] == kind && r[3] == *b && r[2] == "1");
+            let row = rows.iter().find(|r| r[0] == "cow" && r[1] == kind && r[3] == b.as_str() && r[2] == "1");
             let row = row.unwrap_or_else(|| panic!("no 1-thread {kind} row for {b}: {csv}"));
             let m: f64 = row[4].parse().unwrap();
             assert!(m.is_finite() && m > 0.0, "{row:?}");
@@ -273,17 +280,27 @@ fn bench_writes_csv_and_markdown_tables() {
     assert!(stdout.contains("| cow | 5856 | native |"), "{stdout}");
     assert!(md.contains("| cow | 5856 | native |") && md.contains("| scene | backend | nodes | leaves | total |"), "{md}");
     if embree {
-        assert!(md.contains("native ÷ embree throughput") && md.contains("native ÷ embree-high throughput"), "{md}");
-        // Embree's own SAH statistics were read back for the comparison.
+        for e in &embrees {
+            assert!(md.contains(&format!("native ÷ {e} throughput")) && md.contains(&format!("native ÷ {e}-high throughput")), "{md}");
+        }
+        // Each Embree's own SAH statistics were read back for the comparison.
         let sah = md.lines().find(|l| l.starts_with("| cow | native | ")).unwrap();
         let cells: Vec<&str> = sah.split('|').map(str::trim).collect();
-        let ratio: f64 = cells[7].parse().unwrap_or_else(|_| panic!("no native ÷ Embree SAH ratio: {sah}"));
-        assert!(ratio > 0.5 && ratio < 2.0, "{sah}");
+        for (e, col) in [("embree3", 7), ("embree4", 9)] {
+            if embrees.iter().any(|x| x == e) {
+                let ratio: f64 = cells[col].parse().unwrap_or_else(|_| panic!("no native ÷ {e} SAH ratio: {sah}"));
+                assert!(ratio > 0.5 && ratio < 2.0, "{sah}");
+            }
+        }
+        // Each Embree's batch calls were timed.
+        for e in &embrees {
+            assert!(md.contains(&format!("| cow | {e} | camera |")), "no batch-call row for {e}: {md}");
+        }
     } else {
         eprintln!("note: Embree is not built in; the bench's Embree columns were not checked");
     }
     if cfg!(feature = "peers") {
-        assert!(md.contains("native ÷ obvhs throughput"), "{md}");
+        assert!(md.contains("native ÷ obvhs throughput") && md.contains("native ÷ tinybvh throughput"), "{md}");
     } else {
         eprintln!("note: built without --features peers; the obvhs rows were not checked");
     }

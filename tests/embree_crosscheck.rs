@@ -1,9 +1,10 @@
-//! Embree against the native BVH: every shipped scene, camera and random
-//! rays, closest hits, occlusion, batch calls, and normal-shading images.
+//! Embree 3 and Embree 4 against the native BVH: every shipped scene, camera
+//! and random rays, closest hits, occlusion, every batch call, and
+//! normal-shading images; and the ABI canary of each library.
 //!
-//! Without Embree in the build these tests are reported as ignored, with the
-//! reason (CI's first pass sets PATHTRACER_REQUIRE_EMBREE=1, which turns a
-//! missing Embree into a failure instead).
+//! A major that cannot be used here is skipped with the reason on stderr
+//! (CI sets PATHTRACER_REQUIRE_EMBREE=3,4, which turns a missing one into a
+//! failure instead); without any Embree in the build the tests are ignored.
 
 mod common;
 
@@ -15,12 +16,13 @@ use pathtracer::render::{self, normals::NormalShading, RenderSettings};
 use pathtracer::scene::Scene;
 use rayon::prelude::*;
 
-fn embree_present() -> bool {
-    let present = common::backends().contains(&BackendKind::Embree);
-    if !present {
-        eprintln!("SKIPPED: Embree is not in this build; the cross-check did not run");
+/// The Embree backends to check; loud when there is none.
+fn embrees() -> Vec<BackendKind> {
+    let v = common::embree_backends();
+    if v.is_empty() {
+        eprintln!("SKIPPED: no Embree can be used here; the cross-check did not run");
     }
-    present
+    v
 }
 
 const REL: f32 = 1e-5;
@@ -125,24 +127,21 @@ fn cross_check(scene: &Scene, native: &dyn Traversal, embree: &dyn Traversal, ra
 #[test]
 #[cfg_attr(not(has_embree), ignore = "Embree is not in this build")]
 fn embree_agrees_with_native_on_every_shipped_scene() {
-    if !embree_present() {
-        return;
-    }
     let mut report = Vec::new();
-    for path in common::shipped_scenes() {
+    for (path, kind) in common::shipped_scenes().into_iter().flat_map(|p| embrees().into_iter().map(move |k| (p.clone(), k))) {
         let scene = common::load(&path);
         let native = common::build(BackendKind::Native, &scene.shapes);
-        let embree = common::build(BackendKind::Embree, &scene.shapes);
+        let embree = common::build(kind, &scene.shapes);
         let camera = Camera::from_scene(&scene);
         let mut rays = camera_rays(&camera, 320, 240);
         rays.extend(random_rays(&scene, 76_800, 11));
         let t = cross_check(&scene, native.as_ref(), embree.as_ref(), &rays);
-        assert!(t.errors.is_empty(), "{}: {} disagreements, first: {}", path.display(), t.errors.len(), t.errors[0]);
+        assert!(t.errors.is_empty(), "{kind} {}: {} disagreements, first: {}", path.display(), t.errors.len(), t.errors[0]);
         // Ties are equal-distance coincidences (rays through a shared edge);
         // pixel-centre camera rays can line up with an edge of a simple mesh
         // (the cube's face diagonals: 0.11 %), so allow up to 0.5 %.
-        assert!(t.ties * 200 <= t.hits.max(1), "{}: {} ties in {} hits", path.display(), t.ties, t.hits);
-        report.push(format!("{}: {} rays, {} hits, {} ties, {} t/u/v beyond 1e-5 (within the f32 bound)", scene.name, t.rays, t.hits, t.ties, t.widened));
+        assert!(t.ties * 200 <= t.hits.max(1), "{kind} {}: {} ties in {} hits", path.display(), t.ties, t.hits);
+        report.push(format!("{kind} {}: {} rays, {} hits, {} ties, {} t/u/v beyond 1e-5 (within the f32 bound)", scene.name, t.rays, t.hits, t.ties, t.widened));
     }
     eprintln!("{}", report.join("\n"));
 }
@@ -150,15 +149,22 @@ fn embree_agrees_with_native_on_every_shipped_scene() {
 #[test]
 #[cfg_attr(not(has_embree), ignore = "Embree is not in this build")]
 fn embree_batches_match_single_rays() {
-    if !embree_present() {
-        return;
+    for kind in embrees() {
+        batches_match_single_rays(kind);
     }
+}
+
+/// Every batch call of one Embree (each mode, coherent and not) against its
+/// single-ray calls, with invalid rays inside the batches.
+fn batches_match_single_rays(kind: BackendKind) {
+    use pathtracer::accel::embree::{BatchMode, EmbreeBackend, Quality};
     let scene = common::load(&common::scene_path("sky", "CBbunny"));
-    let embree = common::build(BackendKind::Embree, &scene.shapes);
+    let (major, _) = kind.embree().unwrap().unwrap();
+    let mut embree = EmbreeBackend::build(major, &scene.shapes, 0, Quality::Medium).unwrap();
     let mut rays = camera_rays(&Camera::from_scene(&scene), 64, 48);
     rays.extend(random_rays(&scene, 3000, 5));
     // The benchmark's shadow rays: from camera hits towards one point.
-    let shadows = pathtracer::bench::shadow_rays(&scene, embree.as_ref(), &camera_rays(&Camera::from_scene(&scene), 64, 48));
+    let shadows = pathtracer::bench::shadow_rays(&scene, &embree, &camera_rays(&Camera::from_scene(&scene), 64, 48));
     rays.extend(shadows);
     // Invalid rays inside a batch must not disturb their neighbours.
     rays[7].dir = glam::Vec3::ZERO;
@@ -171,39 +177,40 @@ fn embree_batches_match_single_rays() {
     assert!(rays.len() % 256 != 0);
     let single: Vec<Option<Hit>> = rays.iter().map(|r| embree.intersect(r)).collect();
     let single_occ: Vec<bool> = rays.iter().map(|r| embree.occluded(r)).collect();
-    let mut hits = vec![None; rays.len()];
-    let mut occ = vec![false; rays.len()];
-    for coherent in [false, true] {
-        if coherent {
-            embree.intersect_coherent(&rays, &mut hits);
-            embree.occluded_coherent(&rays, &mut occ);
-        } else {
-            embree.intersect_batch(&rays, &mut hits);
-            embree.occluded_batch(&rays, &mut occ);
+    for &mode in BatchMode::all(major) {
+        embree.set_batch_modes(mode, mode);
+        let mut hits = vec![None; rays.len()];
+        let mut occ = vec![false; rays.len()];
+        for coherent in [false, true] {
+            if coherent {
+                embree.intersect_coherent(&rays, &mut hits);
+                embree.occluded_coherent(&rays, &mut occ);
+            } else {
+                embree.intersect_batch(&rays, &mut hits);
+                embree.occluded_batch(&rays, &mut occ);
+            }
+            assert_eq!(occ, single_occ, "{kind} {mode:?} coherent={coherent}");
+            for (i, (a, b)) in hits.iter().zip(&single).enumerate() {
+                let ok = match (a, b) {
+                    (None, None) => true,
+                    (Some(a), Some(b)) => close(a.t, b.t) && (a.prim_id == b.prim_id || close(a.t, b.t)),
+                    _ => false,
+                };
+                assert!(ok, "{kind} {mode:?} coherent={coherent} ray {i}: batch {a:?} single {b:?}");
+            }
         }
-        assert_eq!(occ, single_occ, "coherent={coherent}");
-        for (i, (a, b)) in hits.iter().zip(&single).enumerate() {
-            let ok = match (a, b) {
-                (None, None) => true,
-                (Some(a), Some(b)) => close(a.t, b.t) && (a.prim_id == b.prim_id || close(a.t, b.t)),
-                _ => false,
-            };
-            assert!(ok, "coherent={coherent} ray {i}: batch {a:?} single {b:?}");
-        }
+        assert!(hits[7].is_none() && hits[100].is_none() && hits[300].is_none() && hits[last].is_none(), "{kind} {mode:?}");
     }
-    assert!(hits[7].is_none() && hits[100].is_none() && hits[300].is_none() && hits[last].is_none());
 }
 
 #[test]
 #[cfg_attr(not(has_embree), ignore = "Embree is not in this build")]
 fn normal_images_of_cornell_boxes_are_identical_but_for_ties() {
-    if !embree_present() {
-        return;
-    }
-    for path in common::shipped_scenes().into_iter().filter(|p| p.file_stem().unwrap().to_string_lossy().starts_with("CB")) {
+    let kinds = embrees();
+    for (path, kind) in common::shipped_scenes().into_iter().filter(|p| p.file_stem().unwrap().to_string_lossy().starts_with("CB")).flat_map(|p| kinds.iter().map(move |&k| (p.clone(), k))) {
         let scene = common::load(&path);
         let native = common::build(BackendKind::Native, &scene.shapes);
-        let embree = common::build(BackendKind::Embree, &scene.shapes);
+        let embree = common::build(kind, &scene.shapes);
         let mut camera = Camera::from_scene(&scene);
         camera.set_screen_size(320, 240);
         let settings = RenderSettings::new(320, 240, 1, 0);
@@ -230,10 +237,62 @@ fn normal_images_of_cornell_boxes_are_identical_but_for_ties() {
                 png_bytes += (same && tone(pa) != tone(pb)) as usize;
             }
         }
-        assert!(ties <= 320 * 240 / 1000, "{}: {ties} tie pixels", path.display());
+        assert!(ties <= 320 * 240 / 1000, "{kind} {}: {ties} tie pixels", path.display());
         // Floats differ in the last bits wherever the barycentrics do; the
         // 8-bit images a user sees must be identical but for rare rounding.
         assert!(png_bytes <= 320 * 240 / 1000, "{}: {png_bytes} pixels differ in the PNG", path.display());
-        eprintln!("{}: {ties} tie pixels, {last_bits} pixels differing in the last bits of the barycentrics, {png_bytes} of them visible in the 8-bit PNG", scene.name);
+        eprintln!("{kind} {}: {ties} tie pixels, {last_bits} pixels differing in the last bits of the barycentrics, {png_bytes} of them visible in the 8-bit PNG", scene.name);
     }
+}
+
+/// The ABI canary: a library newer than the headers its shim was compiled
+/// against may write past the hit structures those headers describe (Embree
+/// 4.4.0 writes the instPrimID field 4.2.0's headers lack). Every buffer
+/// the shim hands to Embree is padded; this keeps what each library writes,
+/// for single rays and packets of 4, 8 and 16, within that padding.
+#[test]
+#[cfg_attr(not(has_embree), ignore = "Embree is not in this build")]
+fn each_embree_writes_within_the_shims_padding() {
+    for kind in embrees() {
+        let (major, _) = kind.embree().unwrap().unwrap();
+        let lib = pathtracer::accel::embree::library(major).unwrap();
+        let mut report = Vec::new();
+        for width in [1, 4, 8, 16] {
+            let (written, padding) = pathtracer::accel::embree::abi_probe(major, width).unwrap();
+            assert!(written <= padding, "{kind}: the library wrote {written} bytes past the {width}-ray hit structure; the shim pads {padding}");
+            report.push(format!("{width} rays: {written} bytes"));
+        }
+        // Where headers and library agree, nothing is written past them.
+        if lib.version / 100 == lib.header_version / 100 {
+            assert!(report.iter().all(|r| r.ends_with(": 0 bytes")), "{kind}: headers and library are the same minor, yet {report:?}");
+        }
+        eprintln!("{kind} ({}, headers {}): written past the headers' hit structures: {}", lib.version_string(), lib.header_version, report.join(", "));
+    }
+}
+
+/// Both libraries in one process, each resolving its own symbols: building
+/// and tracing with one, then the other, then the first again gives the
+/// same hits (with both bound to one library's code, the second would fail
+/// or answer with the other's).
+#[test]
+#[cfg_attr(not(has_embree), ignore = "Embree is not in this build")]
+fn both_embrees_live_in_one_process() {
+    let kinds = embrees();
+    if kinds.len() < 2 {
+        eprintln!("SKIPPED: needs both Embree 3 and Embree 4 ({} here)", kinds.len());
+        return;
+    }
+    let scene = common::load(&common::scene_path("sky", "CBspheres"));
+    let rays = camera_rays(&Camera::from_scene(&scene), 32, 24);
+    let trace = |kind: BackendKind| -> Vec<Option<(u32, u32)>> {
+        let b = common::build(kind, &scene.shapes);
+        rays.iter().map(|r| b.intersect(r).map(|h| (h.geom_id, h.prim_id))).collect()
+    };
+    let a = trace(kinds[0]);
+    let b = trace(kinds[1]);
+    let c = trace(kinds[0]);
+    assert_eq!(a, c);
+    assert_eq!(a, b);
+    let versions: Vec<String> = pathtracer::accel::embree::Major::ALL.iter().map(|&m| pathtracer::accel::embree::version_string(m)).collect();
+    assert!(versions[0].starts_with("Embree 3.") && versions[1].starts_with("Embree 4."), "{versions:?}");
 }

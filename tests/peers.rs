@@ -5,16 +5,27 @@
 #![cfg(feature = "peers")]
 
 use pathtracer::accel::obvhs_peer::ObvhsPeer;
+use pathtracer::accel::tinybvh_peer::{Build, TinyBvhPeer};
 use pathtracer::accel::{self, BackendKind, Traversal};
 use pathtracer::bench::{camera_rays, load_bench_scene, random_rays, shadow_rays};
 use pathtracer::camera::Camera;
 
 #[test]
 fn obvhs_finds_the_hits_native_finds() {
+    finds_the_hits_native_finds("obvhs", |s| Box::new(ObvhsPeer::build(s).unwrap()));
+}
+
+#[test]
+fn tinybvh_finds_the_hits_native_finds() {
+    finds_the_hits_native_finds("tinybvh", |s| Box::new(TinyBvhPeer::build(s, Build::Sah).unwrap()));
+    finds_the_hits_native_finds("tinybvh-hq", |s| Box::new(TinyBvhPeer::build(s, Build::Hq).unwrap()));
+}
+
+fn finds_the_hits_native_finds(name: &str, build: impl Fn(&[pathtracer::scene::Shape]) -> Box<dyn Traversal>) {
     for spec in ["arch:100k", "grass:50k", "sphere:20k"] {
         let scene = load_bench_scene(spec).unwrap();
         let native = accel::build(BackendKind::Native, &scene.shapes, 0).unwrap().accel;
-        let peer = ObvhsPeer::build(&scene.shapes).unwrap();
+        let peer = build(&scene.shapes);
         let cam = camera_rays(&Camera::from_scene(&scene), 160, 120);
         let mut rays = cam.clone();
         rays.extend(random_rays(&scene, 20_000, 3));
@@ -40,9 +51,9 @@ fn obvhs_finds_the_hits_native_finds() {
             }
         }
         let total = rays.len() + shadow.len();
-        eprintln!("{spec}: {differ} of {total} answers differ ({hits} hits)");
-        assert!(hits > rays.len() / 10, "{spec}: too few hits to compare ({hits})");
+        eprintln!("{name} {spec}: {differ} of {total} answers differ ({hits} hits)");
+        assert!(hits > rays.len() / 10, "{name} {spec}: too few hits to compare ({hits})");
         // Edge-grazing rays may go either way without a watertight test.
-        assert!(differ * 1000 <= total, "{spec}: {differ} of {total} answers differ from native");
+        assert!(differ * 1000 <= total, "{name} {spec}: {differ} of {total} answers differ from native");
     }
 }

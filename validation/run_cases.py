@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The validation harness driver: export each case's scene from our loader, render it with
-both of our backends and with the reference renderers (Mitsuba 3, Blender Cycles, POV-Ray),
+each of our backends (native, Embree 3, Embree 4) and with the reference renderers (Mitsuba 3, Blender Cycles, POV-Ray),
 and write statistical verdicts to validation/out/summary.json and validation/out/report.html.
 
 Two kinds of case:
@@ -122,12 +122,20 @@ class Harness:
         self.view = ["-r", str(tier["w"]), str(tier["h"]), "--keep-fov"]
         self.cache = os.path.join(self.out, "cache")
         os.makedirs(self.cache, exist_ok=True)
+        # The backend axis: native and each Embree that loads here. CI
+        # requires both Embrees (PATHTRACER_REQUIRE_EMBREE, as the tests do).
         self.backends = ["native"]
-        probe = subprocess.run([self.pt, "--backend", "embree", "-r", "4", "3", "-s", "1", "-f", os.path.join(self.out, "probe.png")], capture_output=True, text=True)
-        if probe.returncode == 0:
-            self.backends.append("embree")
-        else:
-            print(f"run_cases: embree backend unavailable ({probe.stderr.strip()}); native only", file=sys.stderr)
+        required = os.environ.get("PATHTRACER_REQUIRE_EMBREE", "")
+        required = ["3", "4"] if required in ("1", "all") else [m.strip() for m in required.split(",") if m.strip()]
+        for major in ("3", "4"):
+            backend = f"embree{major}"
+            probe = subprocess.run([self.pt, "--backend", backend, "-r", "4", "3", "-s", "1", "-f", os.path.join(self.out, "probe.png")], capture_output=True, text=True)
+            if probe.returncode == 0:
+                self.backends.append(backend)
+            elif major in required:
+                sys.exit(f"run_cases: PATHTRACER_REQUIRE_EMBREE names Embree {major}, but: {probe.stderr.strip()}")
+            else:
+                print(f"run_cases: {backend} backend unavailable ({probe.stderr.strip()}); left out", file=sys.stderr)
         for f in ("probe.png", "probe_rate.png"):
             if os.path.exists(os.path.join(self.out, f)):
                 os.remove(os.path.join(self.out, f))

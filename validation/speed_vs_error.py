@@ -20,7 +20,7 @@ import math
 import os
 import sys
 
-COLOURS = {"native": "#d62728", "embree": "#1f77b4", "mitsuba": "#2ca02c", "cycles": "#ff7f0e"}
+COLOURS = {"native": "#d62728", "embree": "#1f77b4", "embree3": "#1f77b4", "embree4": "#17becf", "mitsuba": "#2ca02c", "cycles": "#ff7f0e"}
 
 
 def load(path):

@@ -11,6 +11,8 @@ pub mod wide;
 pub mod embree;
 #[cfg(feature = "peers")]
 pub mod obvhs_peer;
+#[cfg(feature = "peers")]
+pub mod tinybvh_peer;
 pub mod prims;
 
 use crate::error::Result;
@@ -123,16 +125,54 @@ pub trait Traversal: Send + Sync {
 pub enum BackendKind {
     /// Our binned-SAH BVH.
     Native,
-    /// Intel Embree through the C shim in `native/` (MEDIUM build quality,
-    /// Embree's default).
+    /// The newest Embree this build can load (Embree 4 where both are):
+    /// MEDIUM build quality, Embree's default, and ROBUST (watertight).
     Embree,
-    /// Embree with HIGH build quality: its spatial-split builder (slower
-    /// builds, fewer box tests per ray), which needs the ROBUST flag off,
-    /// so not watertight: the benchmark's build-quality reference.
+    /// The newest Embree with HIGH build quality: its spatial-split builder
+    /// (slower builds, fewer box tests per ray), which needs the ROBUST flag
+    /// off, so not watertight: the benchmark's build-quality reference.
     #[value(name = "embree-high")]
     EmbreeHigh,
+    /// Embree 3 (Debian's 3.13.5), MEDIUM, ROBUST.
+    #[value(name = "embree3")]
+    Embree3,
+    /// Embree 3, HIGH quality (not watertight; for the benchmark).
+    #[value(name = "embree3-high")]
+    Embree3High,
+    /// Embree 4 (4.4.0 from PyPI's embreex4 wheel), MEDIUM, ROBUST.
+    #[value(name = "embree4")]
+    Embree4,
+    /// Embree 4, HIGH quality (not watertight; for the benchmark).
+    #[value(name = "embree4-high")]
+    Embree4High,
     /// No acceleration: every ray tests every primitive (the test oracle).
     Brute,
+}
+
+impl BackendKind {
+    /// For the Embree backends: which major, resolving `embree` and
+    /// `embree-high` to the newest that loads here, and which quality.
+    pub fn embree(self) -> Option<Result<(embree::Major, embree::Quality)>> {
+        use embree::{Major, Quality};
+        let newest = || {
+            embree::newest().ok_or_else(|| {
+                crate::Error::new(format!(
+                    "no Embree can be used here: embree4: {}; embree3: {}",
+                    embree::unavailable_reason(Major::V4),
+                    embree::unavailable_reason(Major::V3)
+                ))
+            })
+        };
+        Some(match self {
+            BackendKind::Embree => newest().map(|m| (m, Quality::Medium)),
+            BackendKind::EmbreeHigh => newest().map(|m| (m, Quality::High)),
+            BackendKind::Embree3 => Ok((Major::V3, Quality::Medium)),
+            BackendKind::Embree3High => Ok((Major::V3, Quality::High)),
+            BackendKind::Embree4 => Ok((Major::V4, Quality::Medium)),
+            BackendKind::Embree4High => Ok((Major::V4, Quality::High)),
+            BackendKind::Native | BackendKind::Brute => return None,
+        })
+    }
 }
 
 impl fmt::Display for BackendKind {
@@ -141,6 +181,10 @@ impl fmt::Display for BackendKind {
             BackendKind::Native => "native",
             BackendKind::Embree => "embree",
             BackendKind::EmbreeHigh => "embree-high",
+            BackendKind::Embree3 => "embree3",
+            BackendKind::Embree3High => "embree3-high",
+            BackendKind::Embree4 => "embree4",
+            BackendKind::Embree4High => "embree4-high",
             BackendKind::Brute => "brute",
         })
     }
@@ -159,8 +203,10 @@ pub fn build(kind: BackendKind, shapes: &[Shape], threads: usize) -> Result<Buil
     let accel: Box<dyn Traversal> = match kind {
         BackendKind::Native => Box::new(wide::WideBvh::<{ wide::NATIVE_WIDTH }>::build(shapes)),
         BackendKind::Brute => Box::new(brute::BruteForce::new(shapes)),
-        BackendKind::Embree => Box::new(embree::EmbreeBackend::build(shapes, threads)?),
-        BackendKind::EmbreeHigh => Box::new(embree::EmbreeBackend::build_with_quality(shapes, threads, embree::Quality::High)?),
+        other => {
+            let (major, quality) = other.embree().expect("an Embree backend")?;
+            Box::new(embree::EmbreeBackend::build(major, shapes, threads, quality)?)
+        }
     };
     Ok(Built { accel, build_seconds: start.elapsed().as_secs_f64() })
 }

@@ -37,8 +37,9 @@ pub struct BenchArgs {
     /// `bench::scenes`). Default: cow maxplanck CBbunny beetle sphere:1M
     /// sphere:5M arch:2M grass:2M stadium:2M subdiv:bunny:1.5M arch:10M.
     pub scenes: Vec<String>,
-    /// Backends to time [default: native, embree and embree-high (when built
-    /// in), brute]; the peers built in are timed too unless --no-peers
+    /// Backends to time [default: native, embree3, embree3-high, embree4,
+    /// embree4-high (those that load here), brute]; the peers built in are
+    /// timed too unless --no-peers
     #[arg(long, value_enum, value_delimiter = ',')]
     pub backends: Vec<BackendKind>,
     /// Rays per throughput measurement (brute uses a 1/32 subset)
@@ -184,13 +185,13 @@ fn cpu_model() -> String {
 /// with Embree alone and this parses its `total : sah = X` line. `None`
 /// where that is not possible (not running as the `pathtracer` binary, the
 /// line missing).
-fn embree_sah(name: &str) -> Option<f64> {
+fn embree_sah(name: &str, major: crate::accel::embree::Major) -> Option<f64> {
     let exe = std::env::current_exe().ok()?;
     if !exe.file_name()?.to_string_lossy().starts_with("pathtracer") {
         return None;
     }
     let out = std::process::Command::new(exe)
-        .args(["bench", name, "--backends", "embree", "--no-render", "--rays", "16"])
+        .args(["bench", name, "--backends", &format!("embree{}", major.number()), "--no-render", "--rays", "16"])
         .env("PATHTRACER_EMBREE_CONFIG", "verbose=2")
         .stdin(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
@@ -208,6 +209,8 @@ pub enum Contender {
     Backend(BackendKind),
     #[cfg(feature = "peers")]
     Obvhs,
+    #[cfg(feature = "peers")]
+    TinyBvh(crate::accel::tinybvh_peer::Build),
 }
 
 impl std::fmt::Display for Contender {
@@ -216,6 +219,10 @@ impl std::fmt::Display for Contender {
             Contender::Backend(k) => write!(f, "{k}"),
             #[cfg(feature = "peers")]
             Contender::Obvhs => f.write_str("obvhs"),
+            #[cfg(feature = "peers")]
+            Contender::TinyBvh(crate::accel::tinybvh_peer::Build::Sah) => f.write_str("tinybvh"),
+            #[cfg(feature = "peers")]
+            Contender::TinyBvh(crate::accel::tinybvh_peer::Build::Hq) => f.write_str("tinybvh-hq"),
         }
     }
 }
@@ -231,6 +238,12 @@ impl Contender {
                 let accel = Box::new(accel::obvhs_peer::ObvhsPeer::build(&scene.shapes)?);
                 Ok(accel::Built { accel, build_seconds: start.elapsed().as_secs_f64() })
             }
+            #[cfg(feature = "peers")]
+            Contender::TinyBvh(b) => {
+                let start = std::time::Instant::now();
+                let accel = Box::new(accel::tinybvh_peer::TinyBvhPeer::build(&scene.shapes, b)?);
+                Ok(accel::Built { accel, build_seconds: start.elapsed().as_secs_f64() })
+            }
         }
     }
 }
@@ -240,50 +253,54 @@ fn peers() -> Vec<Contender> {
     #[allow(unused_mut)]
     let mut v = Vec::new();
     #[cfg(feature = "peers")]
-    v.push(Contender::Obvhs);
+    v.extend([Contender::Obvhs, Contender::TinyBvh(crate::accel::tinybvh_peer::Build::Sah), Contender::TinyBvh(crate::accel::tinybvh_peer::Build::Hq)]);
     v
 }
 
 
-/// Embree's batch calls compared on one thread (which one the backend uses
-/// for coherent and incoherent batches was chosen from these numbers), and
-/// the best of them per ray kind pushed to `best`, so that native can be
-/// compared with Embree at its best and not only with the call the
-/// backend uses. Camera and shadow rays go through each call with the
-/// coherent flag, and through the stream once more with the incoherent
-/// flag: on the large meshes that is Embree's fastest shadow call (1
-/// thread, Mrays/s, coherent / incoherent stream: sphere:1M 6.39 / 8.95,
-/// grass:500k 0.60 / 1.21, subdiv:bunny:500k 4.72 / 7.58; cow 26.0 / 16.1).
+/// Each Embree's batch calls compared on one thread (which ones the backend
+/// uses for coherent and incoherent batches were chosen from these numbers,
+/// `embree::Major::default_batch_modes`), and the best of them per ray kind
+/// pushed to `best`, so that native is compared with each Embree at its best
+/// and not only with the calls the backend uses. Every call of the major
+/// (a loop of single rays; Embree 3's streams; packets of 4, 8 and 16) is
+/// timed with the coherent flag for camera and shadow rays and with the
+/// incoherent flag for every ray kind: on the large meshes Embree 3's
+/// incoherent stream is its fastest shadow call (1 thread, Mrays/s, coherent
+/// / incoherent stream: sphere:1M 6.39 / 8.95, grass:500k 0.60 / 1.21,
+/// subdiv:bunny:500k 4.72 / 7.58; cow 26.0 / 16.1).
 #[cfg(has_embree)]
-fn embree_modes(scene: &Scene, cam: &[Ray], rnd: &[Ray], shadow: &[Ray], rows: &mut String, best: &mut Vec<(String, &'static str, f64)>) -> Result<()> {
-    use crate::accel::embree::{BatchMode, EmbreeBackend};
-    let mut e = EmbreeBackend::build(&scene.shapes, 1)?;
-    for (label, rays, rk) in [("camera", cam, RayKind::Camera), ("shadow", shadow, RayKind::Shadow), ("random", rnd, RayKind::Random)] {
+fn embree_modes(
+    major: crate::accel::embree::Major,
+    scene: &Scene,
+    cam: &[Ray],
+    rnd: &[Ray],
+    shadow: &[Ray],
+    rows: &mut String,
+    best: &mut Vec<(String, &'static str, Contender, f64)>,
+) -> Result<()> {
+    use crate::accel::embree::{BatchMode, EmbreeBackend, Quality};
+    let mut e = EmbreeBackend::build(major, &scene.shapes, 1, Quality::Medium)?;
+    let contender = Contender::Backend(if major == crate::accel::embree::Major::V3 { BackendKind::Embree3 } else { BackendKind::Embree4 });
+    for (label, rays, coherent, incoherent) in [
+        ("camera", cam, Some(RayKind::Camera), RayKind::Random),
+        ("shadow", shadow, Some(RayKind::Shadow), RayKind::ShadowIncoherent),
+        ("random", rnd, None, RayKind::Random),
+    ] {
         let mut cells = Vec::new();
         let mut top = 0.0f64;
-        for mode in [BatchMode::Loop, BatchMode::Stream, BatchMode::Packet8] {
+        for &mode in BatchMode::all(major) {
             e.set_batch_modes(mode, mode);
-            let m = throughput(&e, rays, rk, 1, 3);
-            top = top.max(m);
-            cells.push(format!("{m:.2}"));
-        }
-        // The incoherent stream: random rays already took it above.
-        let incoherent = match rk {
-            RayKind::Camera => Some(RayKind::Random),
-            RayKind::Shadow => Some(RayKind::ShadowIncoherent),
-            _ => None,
-        };
-        match incoherent {
-            Some(k) => {
-                e.set_batch_modes(BatchMode::Stream, BatchMode::Stream);
-                let m = throughput(&e, rays, k, 1, 3);
-                top = top.max(m);
-                cells.push(format!("{m:.2}"));
+            for kind in [coherent, Some(incoherent)] {
+                let m = kind.map(|k| throughput(&e, rays, k, 1, 3));
+                if let Some(m) = m {
+                    top = top.max(m);
+                }
+                cells.push(m.map_or("–".to_string(), |m| format!("{m:.2}")));
             }
-            None => cells.push("=".to_string()),
         }
-        best.push((scene.name.clone(), label, top));
-        let _ = writeln!(rows, "| {} | {label} | {} |", scene.name, cells.join(" | "));
+        best.push((scene.name.clone(), label, contender, top));
+        let _ = writeln!(rows, "| {} | embree{} | {label} | {} |", scene.name, major.number(), cells.join(" | "));
     }
     Ok(())
 }
@@ -364,9 +381,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let all = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let backends: Vec<BackendKind> = if args.backends.is_empty() {
         let mut v = vec![BackendKind::Native];
-        if accel::embree::available() {
-            v.push(BackendKind::Embree);
-            v.push(BackendKind::EmbreeHigh);
+        if accel::embree::available(accel::embree::Major::V3) {
+            v.extend([BackendKind::Embree3, BackendKind::Embree3High]);
+        }
+        if accel::embree::available(accel::embree::Major::V4) {
+            v.extend([BackendKind::Embree4, BackendKind::Embree4High]);
         }
         v.push(BackendKind::Brute);
         v
@@ -402,7 +421,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     #[allow(unused_mut)]
     let mut mode_rows = String::new();
     #[allow(unused_mut)]
-    let mut embree_best: Vec<(String, &'static str, f64)> = Vec::new();
+    let mut embree_best: Vec<(String, &'static str, Contender, f64)> = Vec::new();
+    // The Embree majors timed: their SAH costs and batch calls are tabled.
+    let majors: Vec<accel::embree::Major> = accel::embree::Major::ALL
+        .into_iter()
+        .filter(|&m| backends.iter().any(|b| b.embree().and_then(|r| r.ok()).is_some_and(|(mm, _)| mm == m)))
+        .collect();
     for name in &names {
         let scene = load_bench_scene(name)?;
         let prims = scene.primitive_count();
@@ -482,9 +506,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let best_build = build_times.get(&kind).copied().unwrap_or(built[i].1.build_seconds);
             if let Some((nodes, leaves)) = a.sah_cost() {
                 let total = nodes + leaves;
-                let embree = if backends.contains(&BackendKind::Embree) && !args.throughput_only { embree_sah(name) } else { None };
-                let (e, r) = embree.map_or(("–".to_string(), "–".to_string()), |e| (format!("{e:.3}"), format!("{:.3}", total / e)));
-                let _ = writeln!(sah_rows, "| {} | {} | {:.3} | {:.3} | {:.3} | {e} | {r} |", scene.name, kind, nodes, leaves, total);
+                let mut cells = String::new();
+                for major in accel::embree::Major::ALL {
+                    let e = if majors.contains(&major) && !args.throughput_only { embree_sah(name, major) } else { None };
+                    let (e, r) = e.map_or(("–".to_string(), "–".to_string()), |e| (format!("{e:.3}"), format!("{:.3}", total / e)));
+                    let _ = write!(cells, " {e} | {r} |");
+                }
+                let _ = writeln!(sah_rows, "| {} | {} | {:.3} | {:.3} | {:.3} |{cells}", scene.name, kind, nodes, leaves, total);
             }
             let mem = a.memory_bytes() as f64;
             let _ = writeln!(
@@ -501,8 +529,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         }
         drop(built);
         #[cfg(has_embree)]
-        if backends.contains(&BackendKind::Embree) && !args.throughput_only {
-            embree_modes(&scene, &cam, &rnd, &shadow, &mut mode_rows, &mut embree_best)?;
+        if !args.throughput_only {
+            for &major in &majors {
+                embree_modes(major, &scene, &cam, &rnd, &shadow, &mut mode_rows, &mut embree_best)?;
+            }
         }
         if !no_render && !scene.source.starts_with("<generated") {
             let mut times = Vec::new();
@@ -547,20 +577,32 @@ pub fn run(args: &BenchArgs) -> Result<()> {
              expected node visits + expected 4-triangle block tests per ray through the root box. Embree's total is read from its own \
              statistics (a child `pathtracer bench` run with PATHTRACER_EMBREE_CONFIG=verbose=2, line `total : sah = ...`):\n"
         );
-        let _ = writeln!(md, "| scene | backend | nodes | leaves | total | Embree total | native ÷ Embree |");
-        let _ = writeln!(md, "|---|---|---:|---:|---:|---:|---:|");
+        let _ = writeln!(md, "| scene | backend | nodes | leaves | total | Embree 3 total | native ÷ Embree 3 | Embree 4 total | native ÷ Embree 4 |");
+        let _ = writeln!(md, "|---|---|---:|---:|---:|---:|---:|---:|---:|");
         md.push_str(&sah_rows);
     }
     if !mode_rows.is_empty() {
         let _ = writeln!(
             md,
-            "\nEmbree batch calls, 1 thread, Mrays/s (loop of rtcIntersect1 / rtcIntersect1M stream / rtcIntersect8 packets, \
-             camera and shadow rays with the coherent flag; then the stream with the incoherent flag, which the random rays already had):\n"
+            "\nEmbree batch calls, 1 thread, Mrays/s: each call with the coherent flag (camera and shadow rays) and with the incoherent \
+             flag (c / i); the loop of rtcIntersect1, Embree 3's rtcIntersect1M stream (Embree 4 has none: –), rtcIntersect4/8/16 packets:\n"
         );
-        let _ = writeln!(md, "| scene | rays | loop | stream | packet8 | stream, incoherent |");
-        let _ = writeln!(md, "|---|---|---:|---:|---:|---:|");
-        md.push_str(&mode_rows);
-        let _ = writeln!(md, "\nnative ÷ Embree's fastest batch call above (the best of its four columns), 1 thread, from this run:\n");
+        let _ = writeln!(md, "| scene | embree | rays | loop c | loop i | stream c | stream i | packet4 c | packet4 i | packet8 c | packet8 i | packet16 c | packet16 i |");
+        let _ = writeln!(md, "|---|---|---|{}", "---:|".repeat(10));
+        // Embree 4's rows have no stream columns: put dashes in their place.
+        for line in mode_rows.lines() {
+            if line.contains("| embree4 |") {
+                let cells: Vec<&str> = line.split(" | ").collect();
+                // scene, embree4, rays, loop c, loop i, then packets.
+                let mut fixed = cells[..5].to_vec();
+                fixed.extend(["–", "–"]);
+                fixed.extend(&cells[5..]);
+                let _ = writeln!(md, "{}", fixed.join(" | "));
+            } else {
+                let _ = writeln!(md, "{line}");
+            }
+        }
+        let _ = writeln!(md, "\nnative ÷ each Embree's fastest batch call above (the best of its columns), 1 thread, from this run:\n");
         md.push_str(&tables::best_call_table(&samples, &embree_best));
     }
     if !render_rows.is_empty() {

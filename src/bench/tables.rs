@@ -21,23 +21,31 @@ fn mrays(samples: &[Sample], scene: &str, rays: &str, threads: usize, backend: C
     samples.iter().find(|s| s.scene == scene && s.rays == rays && s.threads == threads && s.backend == backend).map(|s| s.mrays_per_s)
 }
 
-/// native's 1-thread Mrays/s ÷ `best` (per scene and ray kind: Embree's
+/// native's 1-thread Mrays/s ÷ `best` (per scene, Embree and ray kind: its
 /// fastest batch call, `embree_modes`), as a table.
-pub(super) fn best_call_table(samples: &[Sample], best: &[(String, &'static str, f64)]) -> String {
-    let mut out = String::from("| scene | camera 1T | shadow 1T | random 1T |\n|---|---:|---:|---:|\n");
-    for sc in in_order(best.iter().map(|b| b.0.as_str())) {
-        let mut row = format!("| {sc} |");
-        for rays in ["camera", "shadow", "random"] {
-            let native = mrays(samples, sc, rays, 1, Contender::Backend(BackendKind::Native));
-            let e = best.iter().find(|b| b.0 == sc && b.1 == rays).map(|b| b.2);
-            match (native, e) {
-                (Some(n), Some(e)) if e > 0.0 => {
-                    let _ = write!(row, " {:.2} |", n / e);
-                }
-                _ => row.push_str(" – |"),
-            }
+pub(super) fn best_call_table(samples: &[Sample], best: &[(String, &'static str, Contender, f64)]) -> String {
+    let mut out = String::from("| scene | ÷ | camera 1T | shadow 1T | random 1T |\n|---|---|---:|---:|---:|\n");
+    let contenders: Vec<Contender> = best.iter().fold(Vec::new(), |mut v, b| {
+        if !v.contains(&b.2) {
+            v.push(b.2);
         }
-        let _ = writeln!(out, "{row}");
+        v
+    });
+    for sc in in_order(best.iter().map(|b| b.0.as_str())) {
+        for &c in &contenders {
+            let mut row = format!("| {sc} | {c} |");
+            for rays in ["camera", "shadow", "random"] {
+                let native = mrays(samples, sc, rays, 1, Contender::Backend(BackendKind::Native));
+                let e = best.iter().find(|b| b.0 == sc && b.1 == rays && b.2 == c).map(|b| b.3);
+                match (native, e) {
+                    (Some(n), Some(e)) if e > 0.0 => {
+                        let _ = write!(row, " {:.2} |", n / e);
+                    }
+                    _ => row.push_str(" – |"),
+                }
+            }
+            let _ = writeln!(out, "{row}");
+        }
     }
     out
 }
@@ -162,9 +170,9 @@ mod tests {
         let mut s = Vec::new();
         for t in [1, 8] {
             s.push(sample("arch", "shadow", t, BackendKind::Native, 10.0 * t as f64));
-            s.push(sample("arch", "shadow", t, BackendKind::Embree, 20.0 * t as f64));
+            s.push(sample("arch", "shadow", t, BackendKind::Embree4, 20.0 * t as f64));
         }
-        let table = ratio_table(&s, &[1, 8], Contender::Backend(BackendKind::Embree));
+        let table = ratio_table(&s, &[1, 8], Contender::Backend(BackendKind::Embree4));
         assert!(table.contains("shadow 8T"), "{table}");
         let row = table.lines().find(|l| l.starts_with("| arch |")).unwrap();
         assert_eq!(row, "| arch | – | – | 0.50 | 0.50 | – | – |");

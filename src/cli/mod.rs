@@ -57,7 +57,8 @@ where
     use clap::FromArgMatches;
     let args: Vec<T> = args.into_iter().collect();
     let bare = args.len() == 1;
-    match docs::command().try_get_matches_from(args).and_then(|m| Cli::from_arg_matches(&m)) {
+    let os: Vec<std::ffi::OsString> = args.iter().cloned().map(Into::into).collect();
+    match docs::command_for(&os).try_get_matches_from(os.iter()).and_then(|m| Cli::from_arg_matches(&m)) {
         Ok(c) => Ok(Some(Cli { bare, ..c })),
         Err(e) => {
             use clap::error::ErrorKind;

@@ -8,20 +8,43 @@ use pathtracer::scene::{collada, Bsdf, CameraDesc, LightDesc, Material, Object, 
 use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
 use std::path::{Path, PathBuf};
 
-/// Every backend built into this binary. Embree is included when the build
-/// found it; `PATHTRACER_REQUIRE_EMBREE=1` (set by CI) makes its absence fatal.
+/// The Embree majors `PATHTRACER_REQUIRE_EMBREE` makes mandatory (set by
+/// CI): `1` or `all` both, else a list such as `3,4` or `4`.
+fn required_embree() -> Vec<u32> {
+    match std::env::var("PATHTRACER_REQUIRE_EMBREE") {
+        Err(_) => Vec::new(),
+        Ok(v) if v == "1" || v == "all" => vec![3, 4],
+        Ok(v) => v.split(',').filter_map(|m| m.trim().parse().ok()).collect(),
+    }
+}
+
+/// The Embree backends that load here (`embree3`, `embree4`), in that
+/// order; a missing one is reported loudly, and fails the test when
+/// `PATHTRACER_REQUIRE_EMBREE` names it.
+pub fn embree_backends() -> Vec<BackendKind> {
+    use pathtracer::accel::embree::{self, Major};
+    let mut v = Vec::new();
+    for (major, kind) in [(Major::V3, BackendKind::Embree3), (Major::V4, BackendKind::Embree4)] {
+        if embree::available(major) {
+            v.push(kind);
+        } else {
+            assert!(
+                !required_embree().contains(&major.number()),
+                "PATHTRACER_REQUIRE_EMBREE names Embree {} but it cannot be used here: {}",
+                major.number(),
+                embree::unavailable_reason(major)
+            );
+            eprintln!("NOTE: the {kind} backend cannot be used here ({}); its cases are skipped", embree::unavailable_reason(major));
+        }
+    }
+    v
+}
+
+/// Every backend that can be used here: native, brute force, and each
+/// Embree that loads (see `embree_backends`).
 pub fn backends() -> Vec<BackendKind> {
     let mut v = vec![BackendKind::Native, BackendKind::Brute];
-    if accel::embree::available() {
-        v.push(BackendKind::Embree);
-    } else {
-        assert!(
-            std::env::var_os("PATHTRACER_REQUIRE_EMBREE").is_none(),
-            "PATHTRACER_REQUIRE_EMBREE is set but this build has no Embree backend: {}",
-            accel::embree::unavailable_reason()
-        );
-        eprintln!("NOTE: Embree backend not built in ({}); Embree cases skipped", accel::embree::unavailable_reason());
-    }
+    v.extend(embree_backends());
     v
 }
 
