@@ -13,7 +13,10 @@ pub mod embree;
 pub mod obvhs_peer;
 #[cfg(feature = "peers")]
 pub mod tinybvh_peer;
+pub mod options;
 pub mod prims;
+
+pub use options::{BuildOptions, NativeIsa, NativeOptions, ShadowWay};
 
 use crate::error::Result;
 use crate::ray::Ray;
@@ -196,12 +199,20 @@ pub struct Built {
     pub build_seconds: f64,
 }
 
-/// Build the chosen backend over `shapes`. `threads` bounds any thread pool the
-/// backend owns (Embree's TBB); 0 means all cores.
+/// Build the chosen backend over `shapes` with the default choices.
+/// `threads` bounds any thread pool the backend owns (Embree's TBB); 0
+/// means all cores.
 pub fn build(kind: BackendKind, shapes: &[Shape], threads: usize) -> Result<Built> {
+    build_with(kind, shapes, &BuildOptions { threads, ..Default::default() })
+}
+
+/// Build the chosen backend over `shapes` with the given choices (the
+/// command line passes the `PATHTRACER_NATIVE_*` switches this way).
+pub fn build_with(kind: BackendKind, shapes: &[Shape], options: &BuildOptions) -> Result<Built> {
     let start = Instant::now();
+    let threads = options.threads;
     let accel: Box<dyn Traversal> = match kind {
-        BackendKind::Native => Box::new(wide::WideBvh::<{ wide::NATIVE_WIDTH }>::build(shapes)),
+        BackendKind::Native => Box::new(wide::WideBvh::<{ wide::NATIVE_WIDTH }>::build_with(shapes, &options.native)),
         BackendKind::Brute => Box::new(brute::BruteForce::new(shapes)),
         other => {
             let (major, quality) = other.embree().expect("an Embree backend")?;

@@ -230,7 +230,7 @@ impl std::fmt::Display for Contender {
 impl Contender {
     fn build(self, scene: &Scene, threads: usize) -> Result<accel::Built> {
         match self {
-            Contender::Backend(k) => accel::build(k, &scene.shapes, threads),
+            Contender::Backend(k) => accel::build_with(k, &scene.shapes, &accel::BuildOptions { threads, native: accel::NativeOptions::from_env()? }),
             #[cfg(feature = "peers")]
             Contender::Obvhs => {
                 // obvhs builds on rayon's global pool (all threads).
@@ -315,7 +315,7 @@ fn path_render_rows(name: &str, backends: &[BackendKind], threads: usize) -> Res
     let mut rows = String::new();
     let mut first: Option<Vec<Vec3>> = None;
     for &kind in backends {
-        let built = accel::build(kind, &scene.shapes, threads)?;
+        let built = accel::build_with(kind, &scene.shapes, &accel::BuildOptions { threads, native: accel::NativeOptions::from_env()? })?;
         let integ = PathTracer {
             scene: &scene,
             accel: built.accel.as_ref(),

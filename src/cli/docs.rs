@@ -18,7 +18,7 @@ pub fn long_version() -> String {
     format!(
         "{}\nbackends: native ({}), brute\n{}\n(embree = {newest})\npeers built in: {}",
         env!("CARGO_PKG_VERSION"),
-        crate::accel::wide::simd_level(),
+        crate::accel::wide::simd_level(crate::accel::NativeOptions::from_env().map(|o| o.isa).unwrap_or_default()),
         embree.join("\n"),
         if cfg!(feature = "peers") { "obvhs, tinybvh (bench only)" } else { "none (build with --features peers)" }
     )

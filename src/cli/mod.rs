@@ -246,7 +246,8 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     if let Some(note) = &batch_note {
         println!("{}: {note}", scene.name);
     }
-    let built = accel::build(a.backend, &scene.shapes, threads)?;
+    let options = accel::BuildOptions { threads, native: accel::NativeOptions::from_env()? };
+    let built = accel::build_with(a.backend, &scene.shapes, &options)?;
     let integrator: Box<dyn Integrator> = match a.integrator {
         IntegratorKind::Normals => Box::new(NormalShading { scene: &scene, accel: built.accel.as_ref() }),
         IntegratorKind::Depth => Box::new(aov::Depth { accel: built.accel.as_ref() }),

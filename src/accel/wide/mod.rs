@@ -111,7 +111,7 @@ pub struct WideBvh<const W: usize> {
     /// has it, unless `PATHTRACER_NATIVE_ISA=sse` asks for the SSE2 path.
     avx: bool,
     /// Coherent packets with AVX-512 (16 rays per leaf box test, 4 rays per
-    /// triangle group test); see `avx512_requested`.
+    /// triangle group test); see `avx512_available`.
     avx512: bool,
     /// Trace incoherent batches several rays at a time (`interleave`): the
     /// structure is too large for the caches, so traversal waits on memory.
@@ -128,6 +128,9 @@ pub struct WideBvh<const W: usize> {
     /// ray (`shadow_way`).
     shadow_way: std::sync::atomic::AtomicU8,
     way_calls: std::sync::atomic::AtomicU32,
+    /// The shadow way the build options fix (`ShadowWay`): 0 timed, 1
+    /// packets, 2 streams.
+    forced_shadow_way: u8,
     way_time: [std::sync::atomic::AtomicU32; 2],
     /// The any-hit child order last chosen (`any_order`): 0 none yet, 1
     /// farthest first, 2 nearest first; and the batches that asked.
@@ -138,28 +141,33 @@ pub struct WideBvh<const W: usize> {
     order_work: [std::sync::atomic::AtomicU32; 2],
 }
 
-/// The SIMD level native traversal runs at on this CPU, with this
-/// process's `PATHTRACER_NATIVE_ISA`: "AVX2", "AVX2, AVX-512 packets" or "SSE2".
-pub fn simd_level() -> &'static str {
-    if avx512_requested() {
+/// The SIMD level native traversal runs at on this CPU with `isa`: "AVX2",
+/// "AVX2, AVX-512 packets" or "SSE2".
+pub fn simd_level(isa: super::NativeIsa) -> &'static str {
+    if avx512_available(isa) {
         "AVX2, AVX-512 packets"
-    } else if avx_available() {
+    } else if avx_available_for(isa) {
         "AVX2"
     } else {
         "SSE2"
     }
 }
 
-/// Whether this CPU runs the AVX2 box test (and the caller did not ask for SSE2).
+/// Whether this CPU runs the AVX2 box test.
 fn avx_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::env::var("PATHTRACER_NATIVE_ISA").map_or(true, |v| v != "sse") && is_x86_feature_detected!("avx2")
+        is_x86_feature_detected!("avx2")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
     }
+}
+
+/// Whether a tree built with `isa` runs the AVX2 kernels.
+fn avx_available_for(isa: super::NativeIsa) -> bool {
+    isa != super::NativeIsa::Sse2 && avx_available()
 }
 
 /// A traversal's stack frame holder: a local of this type makes the
@@ -186,18 +194,19 @@ pub(super) struct CacheAligned<T>(pub(super) T);
 /// Xeon's maxplanck (CBbunny there: 3 % the other way).
 const PACKET_PREFETCH_BYTES: usize = 16 << 20;
 
-/// Whether to run the AVX-512 packet kernels: only when asked for with
-/// `PATHTRACER_NATIVE_ISA=avx512` and the CPU has AVX-512F. Not the
+/// Whether to run the AVX-512 packet kernels: only when asked for
+/// (`NativeIsa::Avx512Packets`, `PATHTRACER_NATIVE_ISA=avx512` on the
+/// command line) and the CPU has AVX-512F. Not the
 /// default, by measurement (1 thread, Mrays/s, AVX2 against AVX-512, three
 /// runs each, medians): on this project's 2-core AMD EPYC (Zen 5) within
 /// noise on every scene (cow camera 65.8/65.4, CBbunny shadow 22.3/23.0,
 /// 1M sphere camera 29.1/29.0); on the device machine's 16-core Xeon the 1M
 /// camera rays lost 30 % (18.9 against 13.2), likely the lower clock Intel
 /// CPUs run AVX-512 code at.
-fn avx512_requested() -> bool {
+fn avx512_available(isa: super::NativeIsa) -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        avx_available() && std::env::var("PATHTRACER_NATIVE_ISA").is_ok_and(|v| v == "avx512") && is_x86_feature_detected!("avx512f")
+        isa == super::NativeIsa::Avx512Packets && avx_available() && is_x86_feature_detected!("avx512f")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -205,21 +214,22 @@ fn avx512_requested() -> bool {
     }
 }
 
-/// The references spatial splits may add, as a fraction of the scene's
-/// primitives (`PATHTRACER_NATIVE_SPLITS`, at most 4; default 0: none, as
-/// measured in `bvh::spatial`).
-fn split_budget() -> f64 {
-    std::env::var("PATHTRACER_NATIVE_SPLITS").ok().and_then(|v| v.parse::<f64>().ok()).filter(|b| b.is_finite() && *b >= 0.0).map_or(0.0, |b| b.min(4.0))
-}
-
 impl<const W: usize> WideBvh<W> {
+    /// The tree over `shapes` with the default choices.
     pub fn build(shapes: &[Shape]) -> Self {
-        Self::build_with_splits(shapes, split_budget())
+        Self::build_with(shapes, &super::NativeOptions::default())
     }
 
     /// The tree over `shapes` with spatial splits allowed to add up to
     /// `budget` references per primitive (0: object splits only).
     pub fn build_with_splits(shapes: &[Shape], budget: f64) -> Self {
+        Self::build_with(shapes, &super::NativeOptions { split_budget: budget, ..Default::default() })
+    }
+
+    /// The tree over `shapes` with `options`' choices (instruction set,
+    /// spatial-split budget, shadow-batch way), fixed for its lifetime.
+    pub fn build_with(shapes: &[Shape], options: &super::NativeOptions) -> Self {
+        let budget = options.split_budget.clamp(0.0, 4.0);
         assert!(W == 4 || W == 8, "WideBvh supports widths 4 and 8");
         let prims = prims::PrimTable::new(shapes);
         let spare = (prims.len() as f64 * budget) as usize;
@@ -232,7 +242,11 @@ impl<const W: usize> WideBvh<W> {
             let code = part.build(set, &prims);
             (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, &prims);
         }
-        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available(), avx512: W == 8 && avx512_requested(), interleave: false, prefetch_packets: false, stream_shadows: false, shadow_way: Default::default(), way_calls: Default::default(), way_time: Default::default(), any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
+        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available_for(options.isa), avx512: W == 8 && avx512_available(options.isa), forced_shadow_way: match options.shadow {
+            super::ShadowWay::Timed => 0,
+            super::ShadowWay::Packets => 1,
+            super::ShadowWay::Streams => 2,
+        }, interleave: false, prefetch_packets: false, stream_shadows: false, shadow_way: Default::default(), way_calls: Default::default(), way_time: Default::default(), any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
         b.interleave = b.avx && b.interleave_pays();
         b.prefetch_packets = b.memory_bytes() >= PACKET_PREFETCH_BYTES;
         b.stream_shadows = b.avx && b.memory_bytes() >= STREAM_MIN_BYTES;

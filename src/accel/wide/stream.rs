@@ -63,9 +63,8 @@ const WAY_REFRESH: u32 = 16;
 const WAY_DECAY: (u32, u32) = (3, 4);
 
 impl<const W: usize> WideBvh<W> {
-    /// `any_packet_way` or `any_streams`, as timed (see `WAY_SAMPLE`;
-    /// `PATHTRACER_NATIVE_SHADOW=packets|streams` fixes the way, for
-    /// measurements). The answers are the same either way; only the speed
+    /// `any_packet_way` or `any_streams`, as timed (see `WAY_SAMPLE`; the
+    /// build options' `ShadowWay` can fix the way, for measurements). The answers are the same either way; only the speed
     /// depends on the timing, so on the order the threads call in.
     ///
     /// # Safety
@@ -73,7 +72,7 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     pub(super) unsafe fn any_either_way<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool], order: ChildOrder) {
         use std::sync::atomic::Ordering::Relaxed;
-        match forced_way() {
+        match self.forced_shadow_way {
             1 => return self.any_packet_way::<WIDE>(rays, out, order),
             2 => return self.any_streams(rays, out, order),
             _ => {}
@@ -297,17 +296,6 @@ unsafe fn pop(stack: &[MaybeUninit<(u32, f32, u64)>; STACK], sp: &mut usize, act
         }
     }
     None
-}
-
-/// `PATHTRACER_NATIVE_SHADOW`: 1 packets, 2 streams, 0 timed (unset or
-/// anything else).
-fn forced_way() -> u8 {
-    static WAY: std::sync::OnceLock<u8> = std::sync::OnceLock::new();
-    *WAY.get_or_init(|| match std::env::var("PATHTRACER_NATIVE_SHADOW").as_deref() {
-        Ok("packets") => 1,
-        Ok("streams") => 2,
-        _ => 0,
-    })
 }
 
 #[cfg(test)]

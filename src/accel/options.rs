@@ -1,0 +1,117 @@
+//! The choices a backend's build fixes, passed in through
+//! [`accel::build_with`](super::build_with) instead of being read from the
+//! environment inside the kernels. The command line reads the
+//! `PATHTRACER_NATIVE_*` switches once ([`NativeOptions::from_env`]); the
+//! library's users and the tests pass what they want.
+
+use crate::error::{Error, Result};
+
+/// Which instruction set native traversal runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum NativeIsa {
+    /// AVX2 where the CPU has it, else SSE2 (the default).
+    #[default]
+    Auto,
+    /// SSE2 even where AVX2 runs (A/B comparisons; same answers).
+    Sse2,
+    /// AVX2 with the AVX-512 packet kernels, where the CPU has AVX-512F
+    /// (not the default, by measurement: level on a Zen 5, 30 % slower
+    /// camera rays on a Xeon; see `wide`).
+    Avx512Packets,
+}
+
+/// How native traces coherent shadow batches over large trees.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ShadowWay {
+    /// Time packets and streams on samples of the batches, keep the faster
+    /// (the default; see `wide::stream`).
+    #[default]
+    Timed,
+    /// Always packets.
+    Packets,
+    /// Always streams.
+    Streams,
+}
+
+/// The native backend's build choices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NativeOptions {
+    pub isa: NativeIsa,
+    /// Spatial splits may add this many references per primitive (0: none,
+    /// the default by measurement; at most 4).
+    pub split_budget: f64,
+    pub shadow: ShadowWay,
+}
+
+impl Default for NativeOptions {
+    fn default() -> Self {
+        NativeOptions { isa: NativeIsa::Auto, split_budget: 0.0, shadow: ShadowWay::Timed }
+    }
+}
+
+impl NativeOptions {
+    /// From `PATHTRACER_NATIVE_ISA` (`sse`, `avx512`), `PATHTRACER_NATIVE_SPLITS`
+    /// (a number from 0 to 4) and `PATHTRACER_NATIVE_SHADOW` (`packets`,
+    /// `streams`); a value outside these is refused, naming the switch.
+    pub fn from_env() -> Result<NativeOptions> {
+        Self::from_lookup(|k| std::env::var(k).ok())
+    }
+
+    /// As `from_env`, with the switches' values from `lookup`.
+    pub fn from_lookup(lookup: impl Fn(&str) -> Option<String>) -> Result<NativeOptions> {
+        let var = |k: &str| lookup(k).filter(|v| !v.is_empty());
+        let mut o = NativeOptions::default();
+        if let Some(v) = var("PATHTRACER_NATIVE_ISA") {
+            o.isa = match v.as_str() {
+                "sse" | "sse2" => NativeIsa::Sse2,
+                "avx512" => NativeIsa::Avx512Packets,
+                "auto" | "avx2" => NativeIsa::Auto,
+                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_ISA={v}: expected sse, avx2 or avx512"))),
+            };
+        }
+        if let Some(v) = var("PATHTRACER_NATIVE_SPLITS") {
+            o.split_budget = match v.parse::<f64>() {
+                Ok(b) if (0.0..=4.0).contains(&b) => b,
+                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_SPLITS={v}: expected a number from 0 to 4"))),
+            };
+        }
+        if let Some(v) = var("PATHTRACER_NATIVE_SHADOW") {
+            o.shadow = match v.as_str() {
+                "packets" => ShadowWay::Packets,
+                "streams" => ShadowWay::Streams,
+                "timed" => ShadowWay::Timed,
+                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_SHADOW={v}: expected packets, streams or timed"))),
+            };
+        }
+        Ok(o)
+    }
+}
+
+/// Everything a build takes besides the backend and the shapes.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct BuildOptions {
+    /// Threads of any pool the backend owns (Embree's TBB); 0: all cores.
+    pub threads: usize,
+    pub native: NativeOptions,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(pairs: &[(&str, &str)]) -> Result<NativeOptions> {
+        NativeOptions::from_lookup(|k| pairs.iter().find(|(kk, _)| *kk == k).map(|(_, v)| v.to_string()))
+    }
+
+    #[test]
+    fn switches_parse_and_bad_values_are_refused_by_name() {
+        assert_eq!(parse(&[]).unwrap(), NativeOptions::default());
+        let o = parse(&[("PATHTRACER_NATIVE_ISA", "sse"), ("PATHTRACER_NATIVE_SPLITS", "0.3"), ("PATHTRACER_NATIVE_SHADOW", "streams")]).unwrap();
+        assert_eq!((o.isa, o.split_budget, o.shadow), (NativeIsa::Sse2, 0.3, ShadowWay::Streams));
+        assert_eq!(parse(&[("PATHTRACER_NATIVE_ISA", "avx512")]).unwrap().isa, NativeIsa::Avx512Packets);
+        for (k, v) in [("PATHTRACER_NATIVE_ISA", "neon"), ("PATHTRACER_NATIVE_SPLITS", "5"), ("PATHTRACER_NATIVE_SPLITS", "nan"), ("PATHTRACER_NATIVE_SHADOW", "both")] {
+            let e = parse(&[(k, v)]).unwrap_err().0;
+            assert!(e.starts_with(&format!("{k}={v}: expected")), "{e}");
+        }
+    }
+}
