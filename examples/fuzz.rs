@@ -4,6 +4,7 @@
 //! cargo run --release --example fuzz -- --cases 1000000            # every reader
 //! cargo run --release --example fuzz -- --cases 100000 --kind ply-binary,exr --seed 7
 //! cargo run --release --example fuzz -- --write-corpus tests/fuzz/corpus
+//! cargo run --release --example fuzz -- --cases 1050000 --paste   # and the table into docs/reliability.md
 //! ```
 //!
 //! Cases run in child processes of this program, `--chunk` cases each, so
@@ -37,6 +38,7 @@ struct Args {
     scratch: PathBuf,
     child: bool,
     show_refusals: usize,
+    paste: bool,
     write_corpus: Option<PathBuf>,
 }
 
@@ -60,6 +62,7 @@ fn parse_args() -> Args {
         scratch: std::env::temp_dir().join(format!("pathtracer-fuzz-{}", std::process::id())),
         child: false,
         show_refusals: 0,
+        paste: false,
         write_corpus: None,
     };
     let mut it = std::env::args().skip(1);
@@ -80,6 +83,7 @@ fn parse_args() -> Args {
             "--findings" => a.findings = value().into(),
             "--scratch" => a.scratch = value().into(),
             "--child" => a.child = true,
+            "--paste" => a.paste = true,
             "--show-refusals" => a.show_refusals = num(value()) as usize,
             "--write-corpus" => a.write_corpus = Some(value().into()),
             other => usage(&format!("unknown flag '{other}'")),
@@ -255,12 +259,45 @@ fn long_run(a: &Args) {
         report.total() as f64 / report.seconds
     );
     print!("{}", report.table());
+    if a.paste {
+        paste_table(a, &report, &cpu, end);
+    }
     let failures = report.findings.len();
     println!("\n{failures} failing cases{}", if failures > 0 { format!(" (inputs in {})", a.findings.display()) } else { String::new() });
     let _ = std::fs::remove_dir_all(&a.scratch);
     if failures > 0 {
         std::process::exit(1);
     }
+}
+
+/// Write the run's table into docs/reliability.md between its fuzz markers.
+fn paste_table(a: &Args, report: &Report, cpu: &str, end: u64) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let commit = Command::new("git").args(["-C", &root.display().to_string(), "rev-parse", "--short", "HEAD"]).output().ok().map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string()).unwrap_or_default();
+    let date = Command::new("date").arg("+%Y-%m-%d").output().ok().map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string()).unwrap_or_default();
+    let text = format!(
+        "**{date}, seed {}, {} cases** (commit {commit}'s fuzzer and readers, {} workers, hang bound {} s, {:.0} s on {}, {:.0} cases/s; `cargo run --release --example fuzz -- --cases {} --seed {} --paste`):\n\n{}",
+        a.seed,
+        end - a.first,
+        a.workers,
+        a.hang_secs,
+        report.seconds,
+        cpu,
+        report.total() as f64 / report.seconds,
+        end - a.first,
+        a.seed,
+        report.table()
+    );
+    let path = root.join("docs/reliability.md");
+    let doc = std::fs::read_to_string(&path).expect("docs/reliability.md");
+    let (start, stop) = ("<!-- fuzz:start -->", "<!-- fuzz:end -->");
+    let (Some(i), Some(j)) = (doc.find(start), doc.find(stop)) else {
+        eprintln!("fuzz: docs/reliability.md has no fuzz markers; nothing pasted");
+        return;
+    };
+    let out = format!("{}{start}\n{}{}", &doc[..i], text, &doc[j..]);
+    std::fs::write(&path, out).expect("write docs/reliability.md");
+    eprintln!("fuzz: the table is in docs/reliability.md");
 }
 
 fn main() {

@@ -263,6 +263,7 @@ fn bench_writes_csv_and_markdown_tables() {
     if cfg!(feature = "peers") {
         backends.push("obvhs".into());
         backends.push("tinybvh".into());
+        backends.push("tinybvh-hq".into());
     }
     backends.push("brute".into());
     let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);

@@ -217,6 +217,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let lens = lens_flags(a)?;
     let part = part_flags(a, spp, adaptive.is_some(), region.unwrap_or(Region { x: 0, y: 0, w: width, h: height }))?;
     let threads = init_threads(a.threads)?;
+    let native = accel::NativeOptions::from_env()?;
 
     let scene = load_scene(a.scene.as_deref())?;
     let camera = setup_camera(a, &scene, width, height, lens)?;
@@ -246,7 +247,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     if let Some(note) = &batch_note {
         println!("{}: {note}", scene.name);
     }
-    let options = accel::BuildOptions { threads, native: accel::NativeOptions::from_env()? };
+    let options = accel::BuildOptions { threads, native };
     let built = accel::build_with(a.backend, &scene.shapes, &options)?;
     let integrator: Box<dyn Integrator> = match a.integrator {
         IntegratorKind::Normals => Box::new(NormalShading { scene: &scene, accel: built.accel.as_ref() }),
