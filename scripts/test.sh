@@ -16,18 +16,20 @@ echo "== test suite (with Embree 3 and Embree 4) =="
 # With the peer BVH libraries built in (tests/peers.rs checks they answer as native does).
 PATHTRACER_REQUIRE_EMBREE=3,4 cargo test --release --features peers
 
+# The passes with Embree hidden share one target folder: their dependencies
+# are built once, and only this crate again for each setting.
 echo "== test suite with both Embrees hidden (PATHTRACER_NO_EMBREE=all) =="
 # The BVH-vs-brute oracle test touches no Embree code and takes two minutes,
 # so this pass skips it; everything else runs again.
-PATHTRACER_NO_EMBREE=all CARGO_TARGET_DIR=target/no-embree cargo test --release -- --skip native_bvh_matches_brute_force
+PATHTRACER_NO_EMBREE=all CARGO_TARGET_DIR=target/hidden cargo test --release -- --skip native_bvh_matches_brute_force
 
 echo "== the Embree tests with one major hidden at a time (PATHTRACER_NO_EMBREE=3, then 4) =="
 # What depends on which Embree is built: the cross-checks, the CLI's
 # backends, split renders and the documented commands, with the other major
 # required.
-PATHTRACER_NO_EMBREE=3 PATHTRACER_REQUIRE_EMBREE=4 CARGO_TARGET_DIR=target/embree4-only cargo test --release \
+PATHTRACER_NO_EMBREE=3 PATHTRACER_REQUIRE_EMBREE=4 CARGO_TARGET_DIR=target/hidden cargo test --release \
     --test embree_crosscheck --test cli --test split --test docs
-PATHTRACER_NO_EMBREE=4 PATHTRACER_REQUIRE_EMBREE=3 CARGO_TARGET_DIR=target/embree3-only cargo test --release \
+PATHTRACER_NO_EMBREE=4 PATHTRACER_REQUIRE_EMBREE=3 CARGO_TARGET_DIR=target/hidden cargo test --release \
     --test embree_crosscheck --test cli --test split --test docs
 
 echo "== API documentation (cargo doc --no-deps, warnings are errors) =="
