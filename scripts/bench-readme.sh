@@ -3,7 +3,7 @@
 # docs/benchmarks/bench.csv, with the run's date and commit as the first line, then pastes the
 # headline table (scripts/bench-summary.py) into README.md between the bench markers, so that
 # every performance number in the documentation is the benchmark's output, never typed. Built
-# with the peer BVH libraries (--features peers). Takes about 21 minutes on 2 cores (the
+# with the peer BVH libraries (--features peers). Takes about 50 minutes on 2 cores (the
 # 1M-10M-triangle generated scenes). `--paste-only` skips the run and pastes from the existing
 # files; other arguments go to `pathtracer bench`.
 set -euo pipefail
@@ -12,7 +12,8 @@ if [ "${1:-}" != "--paste-only" ]; then
     cargo build --release -q --features peers
     commit="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src native build.rs Cargo.toml || echo '+local changes')"
     ./target/release/pathtracer bench --markdown docs/benchmarks/bench.md --csv docs/benchmarks/bench.csv "$@"
-    embree="$(./target/release/pathtracer --version | sed -n 's/.*embree: \([^,]*\).*/\1/p')"
+    embree="$(./target/release/pathtracer --version | sed -n 's/^embree[34]: //p' | paste -sd '&' | sed 's/&/ and /')"
+    [ -n "$embree" ] || embree="no Embree"
     sed -i "1i Run $(date +%Y-%m-%d) at commit $commit (\`scripts/bench-readme.sh\`; $embree)." docs/benchmarks/bench.md
 fi
 python3 scripts/bench-summary.py --paste
