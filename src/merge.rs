@@ -14,6 +14,7 @@
 
 use crate::error::{Error, Result};
 use crate::partial::{Header, Partial, SplitKind};
+use crate::render::splat::SplatSums;
 use crate::render::sums::PixelSums;
 use crate::render::{tile_grid, RenderOutput, Share};
 use std::path::{Path, PathBuf};
@@ -143,6 +144,7 @@ pub fn merge(paths: &[PathBuf]) -> Result<Merged> {
     let header = headers[0].1.clone();
     let region = header.region()?;
     let mut sums = vec![PixelSums::default(); (region.w * region.h) as usize];
+    let mut splats = if header.has_splats() { vec![SplatSums::default(); sums.len()] } else { Vec::new() };
     // In part order (the sums are exact, so the order changes no bit).
     opened.sort_by_key(|(_, o)| o.header.share().map(|s| match s { Share::Samples { lo, .. } => lo, _ => o.header.index }).unwrap_or(0));
     let (mut rays, mut render_seconds, mut cpu_seconds, mut bad_samples) = (0, 0.0, 0.0, 0);
@@ -151,9 +153,10 @@ pub fn merge(paths: &[PathBuf]) -> Result<Merged> {
         render_seconds += o.header.render_seconds;
         cpu_seconds += o.header.cpu_seconds;
         bad_samples += o.header.bad_samples;
-        o.add_into(&p, &mut sums)?;
+        o.add_into(&p, &mut sums, &mut splats)?;
     }
-    let output = RenderOutput::from_sums(region.w, region.h, sums);
+    let frame_pixels = if header.has_splats() { header.frame_pixels()? } else { 0 };
+    let output = RenderOutput::from_sums(region.w, region.h, sums, splats, frame_pixels);
     Ok(Merged { header, output, rays, render_seconds, cpu_seconds, bad_samples })
 }
 

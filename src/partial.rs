@@ -26,8 +26,15 @@
 //! (docs/reliability.md), and damage, not forgery, is what it guards
 //! against. Version 1 partials (no checksums) are refused with a message
 //! saying so.
+//!
+//! Splats: a render whose integrator lands light on other pixels
+//! (`integrator bdpt` or `light` in the header, `Header::has_splats`) stores
+//! after its pixel records the film of splats of the whole region
+//! (`SplatSums::BYTES` per pixel, row-major, every pixel), which `merge`
+//! adds as exactly as the pixel sums; the `records` checksum covers both.
 
 use crate::error::{Error, Result};
+use crate::render::splat::SplatSums;
 use crate::render::sums::PixelSums;
 use crate::render::{tile_grid, Region, Share, TILE};
 use sha2::{Digest, Sha256};
@@ -110,6 +117,17 @@ impl Header {
             Some("tiles") => Ok(SplitKind::Tiles),
             other => Err(Error::new(format!("split '{}' is neither samples nor tiles", other.unwrap_or("")))),
         }
+    }
+
+    /// Whether the part stores a film of splats after its pixel records
+    /// (integrators that trace from the lights).
+    pub fn has_splats(&self) -> bool {
+        matches!(self.get("integrator"), Some("bdpt" | "light"))
+    }
+
+    /// The frame's pixel count (width × height; a region is a part of it).
+    pub fn frame_pixels(&self) -> Result<u64> {
+        Ok(self.get_parsed::<u64>("width")? * self.get_parsed::<u64>("height")?)
     }
 
     pub fn spp(&self) -> Result<u32> {
@@ -256,16 +274,32 @@ fn record_chunks<'a>(pixels: &'a [usize], sums: &'a [PixelSums], chunk: usize) -
     })
 }
 
+/// The film of splats as stored, `chunk` pixels at a time.
+fn splat_chunks(splats: &[SplatSums], chunk: usize) -> impl Iterator<Item = Vec<u8>> + '_ {
+    splats.chunks(chunk).map(|c| {
+        let mut buf = Vec::with_capacity(SplatSums::BYTES * c.len());
+        for s in c {
+            s.write_le(&mut buf);
+        }
+        buf
+    })
+}
+
 /// Write a partial: `sums` has one entry per region pixel; only the covered
-/// ones are stored. Written to a temporary name and renamed into place, so a
-/// retried task simply replaces an identical file.
-pub fn write(path: &Path, header: &Header, sums: &[PixelSums]) -> Result<()> {
+/// ones are stored; `splats` (one per region pixel, when the header's
+/// integrator splats; else empty) follow. Written to a temporary name and
+/// renamed into place, so a retried task simply replaces an identical file.
+pub fn write(path: &Path, header: &Header, sums: &[PixelSums], splats: &[SplatSums]) -> Result<()> {
     let region = header.region()?;
     let pixels = covered_pixels(region, header.share()?);
+    let want = if header.has_splats() { (region.w * region.h) as usize } else { 0 };
+    if splats.len() != want {
+        crate::bail!("{}: {} splat records where the render has {want}", path.display(), splats.len());
+    }
     // The header carries the records' checksum, so they are hashed first
     // (serialising them twice costs far less than the render did).
     let mut hasher = Xxh3::new();
-    for buf in record_chunks(&pixels, sums, 4096) {
+    for buf in record_chunks(&pixels, sums, 4096).chain(splat_chunks(splats, 4096)) {
         hasher.update(&buf);
     }
     let records = Records { pixels: pixels.len() as u64, checksum: hasher.digest128() };
@@ -273,7 +307,7 @@ pub fn write(path: &Path, header: &Header, sums: &[PixelSums]) -> Result<()> {
         let f = std::fs::File::create(tmp).map_err(|e| e.to_string())?;
         let mut w = std::io::BufWriter::with_capacity(1 << 20, f);
         w.write_all(header.to_text(records).as_bytes()).map_err(|e| e.to_string())?;
-        for buf in record_chunks(&pixels, sums, 4096) {
+        for buf in record_chunks(&pixels, sums, 4096).chain(splat_chunks(splats, 4096)) {
             w.write_all(&buf).map_err(|e| e.to_string())?;
         }
         w.into_inner().map_err(|e| e.to_string())?.sync_all().map_err(|e| e.to_string())
@@ -356,13 +390,16 @@ impl Partial {
         if records.pixels != pixels {
             return Err(fail(format!("bad header: 'records {}' where part {}/{} covers {pixels} pixels", records.pixels, header.index, header.count)));
         }
-        let payload_bytes = pixels * PixelSums::BYTES as u64;
+        let region = header.region().map_err(|e| fail(e.0))?;
+        let splat_bytes = if header.has_splats() { region.w as u64 * region.h as u64 * SplatSums::BYTES as u64 } else { 0 };
+        let payload_bytes = pixels * PixelSums::BYTES as u64 + splat_bytes;
         if len - header_bytes != payload_bytes {
             return Err(fail(format!(
-                "{} bytes of pixel records where part {}/{} has {payload_bytes} ({pixels} pixels): the file is cut short or damaged",
+                "{} bytes of records where part {}/{} has {payload_bytes} ({pixels} pixels{}): the file is cut short or damaged",
                 len - header_bytes,
                 header.index,
-                header.count
+                header.count,
+                if splat_bytes > 0 { " and the film of splats" } else { "" }
             )));
         }
         Ok(Partial { header, records, reader })
@@ -373,16 +410,18 @@ impl Partial {
     /// or an impossible sample count this returns an error naming the file
     /// and `sums` holds a part of them, so the caller must discard it
     /// (`merge` writes nothing then).
-    pub fn add_into(mut self, path: &Path, sums: &mut [PixelSums]) -> Result<()> {
-        self.read_records(path, |i, r| sums[i].merge(r))
+    /// `splats` (one per region pixel) takes the film of splats, when the
+    /// part has one.
+    pub fn add_into(mut self, path: &Path, sums: &mut [PixelSums], splats: &mut [SplatSums]) -> Result<()> {
+        self.read_records(path, |i, r| sums[i].merge(r), |i, s| splats[i].merge(s))
     }
 
     /// Check this partial's records (checksum and sample counts) alone.
     pub fn verify(mut self, path: &Path) -> Result<()> {
-        self.read_records(path, |_, _| {})
+        self.read_records(path, |_, _| {}, |_, _| {})
     }
 
-    fn read_records(&mut self, path: &Path, mut use_record: impl FnMut(usize, &PixelSums)) -> Result<()> {
+    fn read_records(&mut self, path: &Path, mut use_record: impl FnMut(usize, &PixelSums), mut use_splat: impl FnMut(usize, &SplatSums)) -> Result<()> {
         let fail = |why: String| Error::new(format!("{}: {why}", path.display()));
         let pixels = covered_pixels(self.header.region()?, self.header.share()?);
         let (samples, exact) = self.header.samples_per_record()?;
@@ -400,6 +439,21 @@ impl Partial {
                 } else if inconsistent.is_none() {
                     inconsistent = Some((i, r.n));
                 }
+            }
+        }
+        if self.header.has_splats() {
+            let region = self.header.region()?;
+            let n = (region.w * region.h) as usize;
+            let mut at = 0;
+            while at < n {
+                let k = (n - at).min(4096);
+                let b = &mut buf[..k * SplatSums::BYTES];
+                self.reader.read_exact(b).map_err(|e| fail(format!("cannot read: {e}")))?;
+                hasher.update(b);
+                for j in 0..k {
+                    use_splat(at + j, &SplatSums::read_le(&b[j * SplatSums::BYTES..]));
+                }
+                at += k;
             }
         }
         if hasher.digest128() != self.records.checksum {
@@ -493,7 +547,7 @@ mod tests {
             }
         }
         let path = dir.join("p.ptp");
-        write(&path, &h, &sums).unwrap();
+        write(&path, &h, &sums, &[]).unwrap();
         (path, h, sums)
     }
 
@@ -502,7 +556,7 @@ mod tests {
         let p = Partial::open(path)?;
         let region = p.header.region()?;
         let mut back = vec![PixelSums::default(); (region.w * region.h) as usize];
-        p.add_into(path, &mut back)
+        p.add_into(path, &mut back, &mut [])
     }
 
     #[test]
@@ -512,7 +566,7 @@ mod tests {
         let p = Partial::open(&path).unwrap();
         assert_eq!(p.header, h);
         let mut back = vec![PixelSums::default(); 70 * 40];
-        p.add_into(&path, &mut back).unwrap();
+        p.add_into(&path, &mut back, &mut []).unwrap();
         for i in covered_pixels(h.region().unwrap(), h.share().unwrap()) {
             assert_eq!(back[i], sums[i]);
         }
@@ -531,6 +585,42 @@ mod tests {
         assert!(Partial::open(&path).err().unwrap().0.contains("a version 1 partial (no checksums)"), "{:?}", Partial::open(&path).err());
         std::fs::write(&path, b"P6\n1 1\n").unwrap();
         assert!(Partial::open(&path).err().unwrap().0.contains("not a pathtracer partial"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_film_of_splats_round_trips_and_its_damage_is_refused() {
+        let dir = scratch("splats");
+        let mut h = header("samples", 0, 2);
+        h.settings[2].1 = "0 0 5 4".into();
+        h.settings.push(("integrator".into(), "bdpt".into()));
+        // Part 0 of 2 of 8 samples: 4 a pixel.
+        let mut sums = vec![PixelSums::default(); 20];
+        for s in &mut sums {
+            (0..4).for_each(|_| {
+                s.add([0.25; 3]);
+            });
+        }
+        let mut splats = vec![SplatSums::default(); 20];
+        for (i, s) in splats.iter_mut().enumerate() {
+            s.add(glam::Vec3::new(i as f32, 0.5, 1e-3 * i as f32));
+        }
+        let path = dir.join("s.ptp");
+        assert!(write(&path, &h, &sums, &[]).is_err(), "a splatting render's part without its film");
+        write(&path, &h, &sums, &splats).unwrap();
+        let (mut back, mut film) = (vec![PixelSums::default(); 20], vec![SplatSums::default(); 20]);
+        Partial::open(&path).unwrap().add_into(&path, &mut back, &mut film).unwrap();
+        assert_eq!(film, splats);
+        let bytes = std::fs::read(&path).unwrap();
+        for offset in [bytes.len() - 1, bytes.len() - 20 * SplatSums::BYTES, bytes.len() - 7 * SplatSums::BYTES + 30] {
+            let mut b = bytes.clone();
+            b[offset] ^= 4;
+            std::fs::write(&path, &b).unwrap();
+            let err = Partial::open(&path).and_then(|p| p.verify(&path)).err().expect("damage accepted").0;
+            assert!(err.ends_with("records damaged (checksum mismatch)"), "{err}");
+        }
+        std::fs::write(&path, &bytes[..bytes.len() - SplatSums::BYTES]).unwrap();
+        assert!(Partial::open(&path).err().unwrap().0.contains("and the film of splats"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -607,7 +697,7 @@ mod tests {
         let (path, h, mut sums) = written(&dir);
         let i = covered_pixels(h.region().unwrap(), h.share().unwrap())[5];
         sums[i].n = 9;
-        write(&path, &h, &sums).unwrap();
+        write(&path, &h, &sums, &[]).unwrap();
         let err = check(&path).err().unwrap().0;
         assert!(err.contains("records inconsistent: pixel") && err.contains("holds 9 samples where part 1/3 has 8"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();

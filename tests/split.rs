@@ -71,6 +71,17 @@ fn assert_split_equals_whole(dir: &Path, args: &[&str], extra: &[&str], ns: &[u3
 }
 
 #[test]
+fn bidirectional_sample_splits_merge_to_the_one_machine_render_byte_for_byte() {
+    // The film of splats travels in the partials and is added exactly: BDPT
+    // with a thin lens, and light tracing over a -p cell (whose splats from
+    // light subpaths landing outside it are dropped in every part alike).
+    let d = scratch("bdpt-samples");
+    assert_split_equals_whole(&d, &["--integrator", "bdpt", "-r", "48", "36", "-s", "12", "-m", "4", "-b", "0.05", "-d", "4.5", "--seed", "5"], &[], &[1, 3, 12]);
+    let d = scratch("light-samples");
+    assert_split_equals_whole(&d, &["--integrator", "light", "-r", "48", "36", "-p", "8", "4", "30", "20", "-s", "8", "-m", "3"], &[], &[2, 5]);
+}
+
+#[test]
 fn sample_splits_merge_to_the_one_machine_render_byte_for_byte() {
     let d = scratch("samples");
     // Global illumination, a thin lens (two more draws per camera ray) and

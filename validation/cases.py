@@ -47,6 +47,9 @@ BOTH = ["mitsuba", "cycles"]
 ALL = BOTH + ["povray"]  # POV-Ray: direct lighting only
 
 
+BDPT = ["--integrator", "bdpt"]
+
+
 TIERS = {
     # width, height, our spp, reference spp per render, reference renders, spp ladder (error
     # against time) with independent renders per rung, cases
@@ -86,6 +89,14 @@ TIERS = {
         radiance("bunny_unlit.dae", 3, BOTH, label="environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_studio"),
         radiance("bunny_microfacet_cu_unlit.dae", 3, BOTH, label="microfacet Cu under courtyard.exr", scene_flags=["-e", envmap("courtyard.exr")], tag="_env_courtyard"),
         radiance(CB, 5, BOTH, label="thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens"),
+        # Bidirectional path tracing (`--only _bdpt` runs these alone). No environment-lit
+        # case: BDPT refuses lights at infinity (docs/design/bdpt.md).
+        radiance("CBspheres.dae", 5, BOTH, BDPT, label="BDPT: mirror and glass", tag="_bdpt"),
+        radiance("CBspheres.dae", 8, BOTH, BDPT, label="BDPT: mirror and glass, -m 8", tag="_bdpt"),
+        radiance("CBgems.dae", 5, BOTH, BDPT, label="BDPT: tinted glass gems", tag="_bdpt"),
+        radiance("CBbunny.dae", 5, BOTH, BDPT, label="BDPT: diffuse bunny", tag="_bdpt"),
+        radiance(CB, 5, BOTH, BDPT, label="BDPT: thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens_bdpt"),
+        radiance(CB, 5, BOTH, ["--integrator", "light"], label="light tracing (diffuse: it cannot see mirrors and glass)", tag="_light_bdpt"),
         geometry(CB),
         geometry("CBbunny.dae"),
         geometry("hard_offset.dae", ref_shift="normalise"),

@@ -1,6 +1,8 @@
 //! CS184's camera: placement from the scene bounds, field-of-view rules,
 //! ray generation, and the six-line camera settings file.
 
+pub mod importance;
+
 use crate::error::{Error, Result};
 use crate::ray::Ray;
 use crate::scene::Scene;

@@ -106,6 +106,12 @@ pub enum Command {
 pub enum IntegratorKind {
     /// Light transport: direct lighting (-m 1) or global illumination (-m > 1).
     Path,
+    /// Bidirectional path tracing: camera and light subpaths joined by every
+    /// strategy, weighted by multiple importance sampling (caustics)
+    Bdpt,
+    /// Light tracing: paths from the lights, each vertex joined to the lens
+    /// (Mitsuba's particle tracer)
+    Light,
     /// Shading normal as colour, n*0.5+0.5 (CS184's normal_shading).
     Normals,
     /// Distance to the first hit along the camera ray (0 where it escapes).
@@ -175,6 +181,11 @@ pub struct RenderArgs {
     /// What to compute per camera ray
     #[arg(help_heading = "Light transport", long, value_enum, default_value_t = IntegratorKind::Path)]
     pub integrator: IntegratorKind,
+    /// With --integrator bdpt: render only strategy S,T (S light vertices, T
+    /// camera vertices) unweighted, or S,T,weighted with its MIS weight, as
+    /// pbrt-v4's strategy images: the weighted ones sum to the full image
+    #[arg(help_heading = "Light transport", long, value_name = "S,T[,weighted]")]
+    pub bdpt_strategy: Option<String>,
     /// Disable Russian roulette (paths then always run to -m bounces)
     #[arg(help_heading = "Light transport", long)]
     pub no_rr: bool,

@@ -11,6 +11,7 @@ use crate::camera::{Camera, DEFAULT_HEIGHT, DEFAULT_WIDTH};
 use crate::error::{Error, Result};
 use crate::image_io;
 use crate::light::Lights;
+use crate::render::bdpt::{Bdpt, Technique};
 use crate::render::{self, aov, normals::NormalShading, path::PathTracer, Adaptive, Integrator, Region, RenderSettings};
 use crate::scene::Bsdf;
 use crate::scene::{builtin, Scene};
@@ -185,7 +186,25 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             Some(r)
         }
     };
-    if a.integrator != IntegratorKind::Path {
+    let transport = matches!(a.integrator, IntegratorKind::Path | IntegratorKind::Bdpt | IntegratorKind::Light);
+    let bidirectional = matches!(a.integrator, IntegratorKind::Bdpt | IntegratorKind::Light);
+    if bidirectional {
+        let name = a.integrator.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default();
+        let path_only = [
+            (a.light_samples.is_some(), "-l"),
+            (a.hemisphere, "-H"),
+            (a.environment.is_some(), "-e (environment maps are lights at infinity, not supported yet by this integrator)"),
+            (adaptive.is_some(), "-a (a pixel's stopping rule cannot see the light other pixels' samples splat into it)"),
+            (a.split == Some(SplitArg::Tiles), "--split tiles (a tile's light subpaths light other tiles)"),
+        ];
+        if let Some((_, flag)) = path_only.iter().find(|(used, _)| *used) {
+            crate::bail!("--integrator {name}: {flag} is not supported with this integrator; use --integrator path");
+        }
+    }
+    if a.bdpt_strategy.is_some() && a.integrator != IntegratorKind::Bdpt {
+        crate::bail!("--bdpt-strategy applies to --integrator bdpt");
+    }
+    if !transport {
         let lighting_flags = [
             (a.light_samples.is_some(), "-l"),
             (a.max_depth.is_some(), "-m"),
@@ -228,7 +247,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     }
 
     let lights = match a.integrator {
-        IntegratorKind::Path => {
+        IntegratorKind::Path | IntegratorKind::Bdpt | IntegratorKind::Light => {
             check_materials(&scene)?;
             let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_sampling(a.env_sampling != EnvSamplingArg::Map, a.env_sampling == EnvSamplingArg::Product).with_specular_guide(&scene, a.specular_guide).with_light_pick(&scene, a.light_pick == LightPickArg::One);
             if l.lights.is_empty() {
@@ -263,6 +282,15 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             light_samples,
             russian_roulette: !a.no_rr,
         }),
+        IntegratorKind::Bdpt | IntegratorKind::Light => {
+            let technique = match (&a.bdpt_strategy, a.integrator) {
+                (_, IntegratorKind::Light) => Technique::LightTracing,
+                (Some(text), _) => parse_strategy(text)?,
+                (None, _) => Technique::Bidirectional,
+            };
+            let region = region.unwrap_or(Region { x: 0, y: 0, w: width, h: height });
+            Box::new(Bdpt::new(&scene, built.accel.as_ref(), &lights, &camera, width, height, region, max_depth, accumulate, technique)?)
+        }
     };
     let mut settings = RenderSettings::new(width, height, spp, a.seed);
     settings.region = region;
@@ -294,7 +322,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             bad_samples: out.bad_samples,
         };
         let path = a.partial.as_deref().expect("clap requires --partial with --part");
-        crate::partial::write(path, &header, &out.sums)?;
+        crate::partial::write(path, &header, &out.sums, &out.splats)?;
         println!(
             "{} | part {}/{} ({} split) | {} | {} threads | wrote {}",
             scene.name,
@@ -328,6 +356,18 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         written.join(", ")
     );
     Ok(())
+}
+
+/// `--bdpt-strategy S,T[,weighted]`.
+fn parse_strategy(text: &str) -> Result<Technique> {
+    let w: Vec<&str> = text.split(',').map(str::trim).collect();
+    let num = |x: &str| x.parse::<usize>().ok();
+    match (w.len(), w.first().and_then(|x| num(x)), w.get(1).and_then(|x| num(x)), w.get(2).copied()) {
+        (2 | 3, Some(s), Some(t), weighted) if t >= 1 && !(s == 1 && t == 1) && matches!(weighted, None | Some("weighted")) => {
+            Ok(Technique::Strategy { s, t, weighted: weighted.is_some() })
+        }
+        _ => crate::bail!("--bdpt-strategy {text}: expected S,T or S,T,weighted with T >= 1 and (S,T) not (1,1) (S light vertices, T camera vertices)"),
+    }
 }
 
 /// The summary line's backend, build, render and ray-throughput fields.

@@ -26,6 +26,7 @@
 //!   solid angle where that pays (`spherical_triangle`), else by area.
 //!   `pdf_hit` applies the same choice.
 
+pub mod emission;
 pub mod env_lobe;
 pub mod env_product;
 pub mod environment;

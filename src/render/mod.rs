@@ -3,8 +3,10 @@
 //! progress bar, ray counts.
 
 pub mod aov;
+pub mod bdpt;
 pub mod normals;
 pub mod path;
+pub mod splat;
 pub mod sums;
 mod wavefront;
 
@@ -13,6 +15,7 @@ use crate::camera::Camera;
 use crate::image_io::Rgb;
 use crate::ray::Ray;
 use crate::sampler::{Sampler, SamplerKind};
+use splat::{Splat, SplatSums};
 use sums::PixelSums;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -44,6 +47,20 @@ pub trait Integrator: Sync {
         for i in 0..rays.len() {
             out[i] = self.radiance_from(&rays[i], hits[i], samplers[i], ray_count);
         }
+    }
+
+    /// Whether the estimate also lands light on other pixels
+    /// (`radiance_splat`: light tracing); the image loop then keeps a film
+    /// of splats (`splat`) and calls `radiance_splat` for every sample.
+    fn splats(&self) -> bool {
+        false
+    }
+
+    /// `radiance_from`, pushing the light that lands elsewhere on the film
+    /// to `splats`.
+    fn radiance_splat(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
+        let _ = splats;
+        self.radiance_from(ray, hit, sampler, rays)
     }
 }
 
@@ -153,7 +170,10 @@ pub struct RenderOutput {
     /// With `keep_sums`: every pixel's exact sums, row 0 at the top (pixels
     /// outside a `Share::Tiles` part have none).
     pub sums: Vec<PixelSums>,
-    /// Samples with a NaN or out-of-range channel (see `sums::SAMPLE_LIMIT`).
+    /// With an integrator that splats: every pixel's exact splat sums, row
+    /// 0 at the top (empty otherwise).
+    pub splats: Vec<SplatSums>,
+    /// Samples (and splats) with a NaN or out-of-range channel (see `sums::SAMPLE_LIMIT`).
     pub bad_samples: u64,
     pub rays: u64,
     pub seconds: f64,
@@ -228,7 +248,8 @@ impl PixelState {
 /// coherent batch. Each sample draws from its own stream (jitter, then the
 /// path), so the image does not depend on batching, tiling, threads or how
 /// the samples are split between processes.
-fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: &mut [PixelState], rule: Option<Adaptive>, rays: &mut u64) {
+fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: &mut [PixelState], rule: Option<Adaptive>, rays: &mut u64, splats: &mut Vec<Splat>) {
+    let splatting = integ.splats();
     let (w, h) = (s.width as f32, s.height as f32);
     let accel = integ.accel();
     let mut active: Vec<usize> = (0..px.len()).filter(|&i| !px[i].done).collect();
@@ -241,7 +262,9 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         for &i in &active {
             let p = &mut px[i];
             p.start_sample();
-            let (jx, jy) = if s.spp == 1 { (0.5, 0.5) } else { p.sampler.camera() };
+            // Splats are box-filtered over their pixel: the camera samples
+            // must be too, even at one sample per pixel.
+            let (jx, jy) = if s.spp == 1 && !splatting { (0.5, 0.5) } else { p.sampler.camera() };
             let (x, y) = ((p.x as f32 + jx) / w, (p.y as f32 + jy) / h);
             // A pinhole draws nothing more: `-b 0` images are those of a
             // camera without a lens, bit for bit.
@@ -250,7 +273,20 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         hits.clear();
         hits.resize(batch.len(), None);
         *rays += batch.len() as u64;
-        if s.batch_rays {
+        if splatting {
+            if s.batch_rays {
+                accel.intersect_coherent(&batch, &mut hits);
+            } else {
+                for (r, h) in batch.iter().zip(hits.iter_mut()) {
+                    *h = accel.intersect(r);
+                }
+            }
+            for (k, &i) in active.iter().enumerate() {
+                let p = &mut px[i];
+                let l = integ.radiance_splat(&batch[k], hits[k], &mut p.sampler, rays, splats);
+                p.add(l, rule);
+            }
+        } else if s.batch_rays {
             accel.intersect_coherent(&batch, &mut hits);
             // `active` lists exactly the unfinished pixels, in order.
             let mut samplers: Vec<&mut Sampler> = px.iter_mut().filter(|p| !p.done).map(|p| &mut p.sampler).collect();
@@ -279,9 +315,10 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
 const PILOT_TAG: u64 = 0x7069_6c6f_7420_5f5f;
 
 /// The pixels `(x, y)` of one tile, in frame coordinates: their sums, the
-/// number of out-of-range samples and the rays traced.
-fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixels: &[(u32, u32)]) -> (Vec<PixelSums>, u64, u64) {
+/// number of out-of-range samples, the rays traced and the splats made.
+fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixels: &[(u32, u32)]) -> (Vec<PixelSums>, u64, u64, Vec<Splat>) {
     let mut rays = 0u64;
+    let mut splats = Vec::new();
     let (lo, hi) = match s.share {
         Share::Samples { lo, hi } => (lo, hi),
         _ => (0, s.spp),
@@ -292,20 +329,20 @@ fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixe
             // samples, throw them away, average fresh ones. The stopping
             // decision is then independent of the samples averaged: unbiased.
             let mut pilot: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.sampler, s.seed ^ PILOT_TAG, s.spp, 0, s.spp)).collect();
-            sample_tile(camera, integ, s, &mut pilot, Some(a), &mut rays);
+            sample_tile(camera, integ, s, &mut pilot, Some(a), &mut rays, &mut Vec::new());
             let mut px: Vec<PixelState> =
                 pixels.iter().zip(&pilot).map(|(&(x, y), p)| PixelState::new(x, y, s.sampler, s.seed, s.spp, 0, p.sums.n)).collect();
-            sample_tile(camera, integ, s, &mut px, None, &mut rays);
+            sample_tile(camera, integ, s, &mut px, None, &mut rays, &mut splats);
             px
         }
         rule => {
             let mut px: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.sampler, s.seed, s.spp, lo, hi - lo)).collect();
-            sample_tile(camera, integ, s, &mut px, rule, &mut rays);
+            sample_tile(camera, integ, s, &mut px, rule, &mut rays, &mut splats);
             px
         }
     };
     let bad = px.iter().map(|p| p.bad).sum();
-    (px.into_iter().map(|p| p.sums).collect(), bad, rays)
+    (px.into_iter().map(|p| p.sums).collect(), bad, rays, splats)
 }
 
 /// Render `settings.region` (or the whole frame) with `integ`: all of it, or
@@ -325,7 +362,7 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
     };
     // Local (x, y) count from the region's top-left; the frame's y runs up
     // from the bottom, so local row ly is frame row region.y + region.h - 1 - ly.
-    let done: Vec<(Vec<(u32, u32)>, Vec<PixelSums>, u64, u64)> = tiles
+    let done: Vec<(Vec<(u32, u32)>, Vec<PixelSums>, u64, u64, Vec<Splat>)> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let mut local = Vec::with_capacity((TILE * TILE) as usize);
@@ -344,9 +381,9 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
                     }
                 }
             }
-            let (sums, bad, rays) = render_tile(camera, integ, settings, &frame);
+            let (sums, bad, rays, splats) = render_tile(camera, integ, settings, &frame);
             bar.inc(1);
-            (local, sums, bad, rays)
+            (local, sums, bad, rays, splats)
         })
         .collect();
     bar.finish_and_clear();
@@ -354,16 +391,28 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
     if settings.keep_sums {
         out.sums = vec![PixelSums::default(); (region.w * region.h) as usize];
     }
-    for (local, sums, bad, tile_rays) in done {
+    let mut cam_sums = vec![PixelSums::default(); (region.w * region.h) as usize];
+    let mut film = if integ.splats() { vec![SplatSums::default(); cam_sums.len()] } else { Vec::new() };
+    for (local, sums, bad, tile_rays, splats) in done {
         for ((lx, ly), p) in local.into_iter().zip(sums) {
-            let i = (ly * region.w + lx) as usize;
-            out.set_pixel(i, &p);
-            if settings.keep_sums {
-                out.sums[i] = p;
-            }
+            cam_sums[(ly * region.w + lx) as usize] = p;
         }
         out.bad_samples += bad;
         out.rays += tile_rays;
+        // Splats landing outside the region are dropped (each light
+        // subpath estimates the whole frame; the region is part of it).
+        for sp in splats {
+            let inside = sp.x >= region.x && sp.x < region.x + region.w && sp.y >= region.y && sp.y < region.y + region.h;
+            if inside {
+                let (lx, ly) = (sp.x - region.x, region.y + region.h - 1 - sp.y);
+                out.bad_samples += film[(ly * region.w + lx) as usize].add(sp.l) as u64;
+            }
+        }
+    }
+    out.fill(&cam_sums, &film, settings.width as u64 * settings.height as u64);
+    if settings.keep_sums {
+        out.sums = cam_sums;
+        out.splats = film;
     }
     out.seconds = start.elapsed().as_secs_f64();
     out
@@ -372,13 +421,32 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
 impl RenderOutput {
     /// The images of a render from every pixel's sums (`merge` makes its
     /// output with this, so it writes exactly what the render would have).
-    pub fn from_sums(width: u32, height: u32, sums: Vec<PixelSums>) -> RenderOutput {
+    /// `splats`: the film of splats (empty for integrators without), for a
+    /// frame of `frame_pixels`.
+    pub fn from_sums(width: u32, height: u32, sums: Vec<PixelSums>, splats: Vec<SplatSums>, frame_pixels: u64) -> RenderOutput {
         let mut out = RenderOutput::blank(width, height);
-        for (i, p) in sums.iter().enumerate() {
-            out.set_pixel(i, p);
-        }
+        out.fill(&sums, &splats, frame_pixels);
         out.sums = sums;
+        out.splats = splats;
         out
+    }
+
+    /// The images from every pixel's sums and, when there are splats, the
+    /// film's estimate added (normalised by the light subpaths traced: one
+    /// per sample of every pixel, see `splat`).
+    fn fill(&mut self, sums: &[PixelSums], splats: &[SplatSums], frame_pixels: u64) {
+        for (i, p) in sums.iter().enumerate() {
+            self.set_pixel(i, p);
+        }
+        if splats.is_empty() {
+            return;
+        }
+        let light_paths: u64 = sums.iter().map(|p| p.n as u64).sum();
+        for (i, sp) in splats.iter().enumerate() {
+            let (m, v) = sp.estimate(light_paths, frame_pixels);
+            self.image.pixels[i] += Vec3::from_array(m);
+            self.variance.pixels[i] += Vec3::from_array(v);
+        }
     }
 
     /// Black images, no samples, no sums.
@@ -388,6 +456,7 @@ impl RenderOutput {
             variance: Rgb::new(width, height),
             samples: vec![0u32; (width * height) as usize],
             sums: Vec::new(),
+            splats: Vec::new(),
             bad_samples: 0,
             rays: 0,
             seconds: 0.0,

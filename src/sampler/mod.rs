@@ -54,6 +54,26 @@ pub mod dim {
     pub const HEMISPHERE: u32 = 5;
     /// Which light a light sample picks (`light::pick`), per `-l` sample.
     pub const LIGHT_PICK: u32 = 6;
+    /// Bidirectional path tracing, at camera vertex `bounce`: the light a
+    /// next-event connection (s = 1) picks, its triangle, its point.
+    pub const CONNECT_PICK: u32 = 7;
+    pub const CONNECT_SELECT: u32 = 8;
+    pub const CONNECT_POINT: u32 = 9;
+    /// Light subpaths (`light_vertex`): at vertex 0, the light picked, its
+    /// triangle, the point and the direction; at vertex i, the lens point a
+    /// light-tracing connection (t = 1) of y(i) chooses; `BSDF_LOBE`,
+    /// `BSDF` and `RUSSIAN_ROULETTE` as at camera vertices.
+    pub const EMIT_PICK: u32 = 10;
+    pub const EMIT_SELECT: u32 = 11;
+    pub const EMIT_POINT: u32 = 12;
+    pub const EMIT_DIRECTION: u32 = 13;
+    pub const LENS_CONNECT: u32 = 14;
+
+    /// The id of `slot` at vertex `vertex` of a light subpath (0 = on the
+    /// light): bit 47 set, which no camera-side id below `k` = 2^39 has.
+    pub fn light_vertex(vertex: u32, slot: u32) -> u64 {
+        (1u64 << 47) | ((vertex as u64) << 16) | (0x80 | slot) as u64
+    }
 
     /// The id of `slot` at path vertex `bounce` (1 = the camera ray's hit),
     /// for the `k`-th of several draws of that slot (light `i`'s sample `j`

@@ -1,0 +1,234 @@
+//! Emission sampling: rays leaving a light, for the integrators that trace
+//! from the lights (bidirectional path tracing, light tracing).
+//!
+//! Model (pbrt-v4's `SampleLe`/`PDF_Le`, the same for every integrator):
+//! * emissive meshes, emissive spheres and proxy-less rectangles: a point
+//!   uniform in area (a mesh's triangle picked by area), then a direction
+//!   cosine-distributed about the geometric normal on the emitting side
+//!   (emission is one-sided, see `light`): pdf_pos = 1/area, pdf_dir = cos/π;
+//! * point lights: the light's position (a delta in position, pdf_pos = 1)
+//!   and a uniform direction, pdf_dir = 1/(4π);
+//! * lights at infinity (directional, hemisphere, environment) have no
+//!   emission sampling here: they need rays from a disk beyond the scene
+//!   (pbrt-v4's `DistantLight::SampleLe`), which is not built. The
+//!   integrators that need this refuse such scenes by name
+//!   (`Light::emits_rays`), never approximating them.
+//!
+//! Which light emits is chosen in proportion to its power (`LightPower`),
+//! independent of position, as pbrt-v4's `PowerLightSampler`: the same
+//! choice starts light subpaths and picks the light of a next-event
+//! connection, so both strategies' densities agree in the MIS weights.
+
+use super::Light;
+use crate::sampling::{cosine_hemisphere, magnitude, uniform_sphere, uniform_triangle, Frame};
+use crate::scene::{Scene, Shape};
+use glam::Vec3;
+use std::f32::consts::PI;
+
+/// A ray leaving a light.
+#[derive(Clone, Copy, Debug)]
+pub struct Emission {
+    /// Where it leaves: on the emitter's surface, or the point light.
+    pub p: Vec3,
+    /// The emitting side's unit normal (zero for a point light).
+    pub n: Vec3,
+    /// Unit direction.
+    pub dir: Vec3,
+    /// Radiance along `dir` (area lights) or intensity (point lights).
+    pub le: Vec3,
+    /// Area density of `p` (1 for a point light: a delta in position).
+    pub pdf_pos: f32,
+    /// Solid-angle density of `dir` given `p`.
+    pub pdf_dir: f32,
+    /// Largest coordinate magnitude of the emitting primitive, for ray offsets.
+    pub magnitude: f32,
+    /// The primitive `p` lies on (a mesh's triangle; 0 otherwise).
+    pub prim: u32,
+}
+
+impl Light {
+    /// Whether this light can start rays (`sample_emission`): every light
+    /// but those at infinity.
+    pub fn emits_rays(&self) -> bool {
+        matches!(self, Light::Point { .. } | Light::Rect { .. } | Light::Mesh { .. } | Light::Sphere { .. })
+    }
+
+    /// Whether a ray can hit this light (an emissive surface of the scene):
+    /// a camera path can then find it by chance, the strategy `s = 0`.
+    pub fn is_hittable(&self) -> bool {
+        matches!(self, Light::Mesh { .. } | Light::Sphere { .. })
+    }
+
+    /// Emitted power (luminance-weighted), up to the common factor π for
+    /// area lights: what the light choice is proportional to.
+    pub fn power(&self) -> f32 {
+        let lum = |c: Vec3| crate::render::illuminance(c).max(0.0);
+        match self {
+            Light::Point { intensity, .. } => 4.0 * PI * lum(*intensity),
+            Light::Rect { ex, ey, radiance, .. } => PI * ex.cross(*ey).length() * lum(*radiance),
+            Light::Mesh { area, radiance, .. } => PI * area * lum(*radiance),
+            Light::Sphere { radius, radiance, .. } => PI * 4.0 * PI * radius * radius * lum(*radiance),
+            _ => 0.0,
+        }
+    }
+
+    /// Area density with which `sample_emission` picks its points (1 for a
+    /// point light, 0 for lights that emit no rays).
+    pub fn emission_pdf_pos(&self) -> f32 {
+        match self {
+            Light::Point { .. } => 1.0,
+            Light::Rect { ex, ey, .. } => 1.0 / ex.cross(*ey).length(),
+            Light::Mesh { area, .. } => 1.0 / area,
+            Light::Sphere { radius, .. } => 1.0 / (4.0 * PI * radius * radius),
+            _ => 0.0,
+        }
+    }
+
+    /// Solid-angle density of `sample_emission` sending `dir` from a point
+    /// whose emitting normal is `n`.
+    pub fn emission_pdf_dir(&self, n: Vec3, dir: Vec3) -> f32 {
+        match self {
+            Light::Point { .. } => 1.0 / (4.0 * PI),
+            Light::Rect { .. } | Light::Mesh { .. } | Light::Sphere { .. } => n.dot(dir).max(0.0) / PI,
+            _ => 0.0,
+        }
+    }
+
+    /// The unit normal of this light's emitting side at `q`, a point a light
+    /// sample (`Light::sample`, on primitive `prim`) chose; zero for a point light.
+    pub fn normal_at(&self, scene: &Scene, q: Vec3, prim: u32) -> Vec3 {
+        match self {
+            Light::Rect { normal, .. } => *normal,
+            Light::Mesh { geom_id, .. } => match &scene.shapes[*geom_id as usize] {
+                Shape::Mesh(m) => {
+                    let [a, b, c] = m.triangles[prim as usize].map(|k| m.positions[k as usize]);
+                    crate::geometry::face_normal(a, b, c)
+                }
+                Shape::Sphere { .. } => Vec3::ZERO,
+            },
+            Light::Sphere { center, .. } => (q - *center).normalize_or_zero(),
+            _ => Vec3::ZERO,
+        }
+    }
+
+    /// A ray leaving this light: `u_sel` picks a mesh's triangle, `u_pos`
+    /// the point, `u_dir` the direction. `None` for lights at infinity and
+    /// for a degenerate draw.
+    pub fn sample_emission(&self, scene: &Scene, u_sel: f32, u_pos: (f32, f32), u_dir: (f32, f32)) -> Option<Emission> {
+        let (p, n, le, magnitude, prim) = match self {
+            Light::Point { position, intensity } => {
+                let dir = uniform_sphere(u_dir.0, u_dir.1);
+                return Some(Emission { p: *position, n: Vec3::ZERO, dir, le: *intensity, pdf_pos: 1.0, pdf_dir: 1.0 / (4.0 * PI), magnitude: position.abs().max_element(), prim: 0 });
+            }
+            Light::Rect { corner, ex, ey, normal, radiance, .. } => {
+                let p = *corner + *ex * u_pos.0 + *ey * u_pos.1;
+                (p, *normal, *radiance, magnitude(&[*corner, *corner + *ex + *ey, *corner + *ex, *corner + *ey]), 0)
+            }
+            Light::Mesh { geom_id, cdf, area, radiance, .. } => {
+                let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { return None };
+                let i = cdf.partition_point(|&c| c <= u_sel * area).min(cdf.len() - 1);
+                let [a, b, c] = m.triangles[i].map(|k| m.positions[k as usize]);
+                let (bu, bv) = uniform_triangle(u_pos.0, u_pos.1);
+                (crate::geometry::triangle::point_at(a, b, c, bu, bv), crate::geometry::face_normal(a, b, c), *radiance, magnitude(&[a, b, c]), i as u32)
+            }
+            Light::Sphere { center, radius, radiance, .. } => {
+                let n = uniform_sphere(u_pos.0, u_pos.1);
+                (*center + n * *radius, n, *radiance, center.abs().max_element() + radius, 0)
+            }
+            _ => return None,
+        };
+        if n == Vec3::ZERO {
+            return None;
+        }
+        let local = cosine_hemisphere(u_dir.0, u_dir.1);
+        let dir = Frame::new(n).to_world(local);
+        let pdf_dir = local.z / PI;
+        (pdf_dir > 0.0).then_some(Emission { p, n, dir, le, pdf_pos: self.emission_pdf_pos(), pdf_dir, magnitude, prim })
+    }
+}
+
+/// The choice of the emitting light, in proportion to power.
+#[derive(Clone, Debug)]
+pub struct LightPower {
+    /// Running sums of the lights' powers (0 for lights that emit no rays).
+    cdf: Vec<f32>,
+    total: f32,
+}
+
+impl LightPower {
+    pub fn new(lights: &[Light]) -> LightPower {
+        let mut acc = 0.0f32;
+        let cdf = lights
+            .iter()
+            .map(|l| {
+                if l.emits_rays() {
+                    acc += l.power();
+                }
+                acc
+            })
+            .collect();
+        LightPower { cdf, total: acc }
+    }
+
+    /// Whether any light emits.
+    pub fn is_empty(&self) -> bool {
+        !(self.total > 0.0)
+    }
+
+    /// The light `u` picks, and the probability of picking it.
+    pub fn pick(&self, u: f32) -> Option<(usize, f32)> {
+        if self.is_empty() {
+            return None;
+        }
+        let k = self.cdf.partition_point(|&c| c <= u * self.total).min(self.cdf.len() - 1);
+        let pmf = self.pmf(k);
+        (pmf > 0.0).then_some((k, pmf))
+    }
+
+    /// The probability of picking light `k`.
+    pub fn pmf(&self, k: usize) -> f32 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let lo = if k == 0 { 0.0 } else { self.cdf[k - 1] };
+        (self.cdf[k] - lo) / self.total
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn emission_densities_match_the_draws() {
+        // A unit-square rectangle facing +z: every draw lies on it, faces
+        // its side, and reports the densities `emission_pdf_*` give.
+        let l = Light::Rect { corner: Vec3::ZERO, ex: Vec3::X * 2.0, ey: Vec3::Y, normal: Vec3::Z, radiance: Vec3::ONE, solid_angle: None };
+        let scene = crate::scene::builtin::load().unwrap();
+        for i in 0..64 {
+            let u = |k: u32| ((i * 7 + k * 13) % 64) as f32 / 64.0 + 1.0 / 128.0;
+            let e = l.sample_emission(&scene, 0.5, (u(0), u(1)), (u(2), u(3))).unwrap();
+            assert!(e.p.x >= 0.0 && e.p.x <= 2.0 && e.p.y >= 0.0 && e.p.y <= 1.0 && e.p.z == 0.0);
+            assert!(e.dir.z > 0.0 && (e.dir.length() - 1.0).abs() < 1e-5);
+            assert_eq!(e.pdf_pos, 0.5);
+            assert!((e.pdf_dir - l.emission_pdf_dir(e.n, e.dir)).abs() < 1e-5);
+        }
+        assert_eq!(l.emission_pdf_dir(Vec3::Z, -Vec3::Z), 0.0);
+    }
+
+    #[test]
+    fn lights_are_picked_by_power() {
+        let lights = vec![
+            Light::Point { position: Vec3::ZERO, intensity: Vec3::ONE },
+            Light::Directional { to_light: Vec3::Y, irradiance: Vec3::ONE },
+            Light::Sphere { center: Vec3::ZERO, radius: 1.0, radiance: Vec3::ONE, cone: true },
+        ];
+        let p = LightPower::new(&lights);
+        // Point: 4π; sphere: 4π²; the directional light emits no rays.
+        let (a, b) = (4.0 * PI, 4.0 * PI * PI);
+        assert!((p.pmf(0) - a / (a + b)).abs() < 1e-6 && p.pmf(1) == 0.0 && (p.pmf(2) - b / (a + b)).abs() < 1e-6);
+        assert_eq!(p.pick(0.0).unwrap().0, 0);
+        assert_eq!(p.pick(0.99).unwrap().0, 2);
+        assert!(LightPower::new(&lights[1..2]).pick(0.5).is_none());
+    }
+}

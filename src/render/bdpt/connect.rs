@@ -1,0 +1,119 @@
+//! The four ways strategy (s, t) joins light vertex y(s−1) to camera vertex
+//! z(t−1) (Veach ch. 10, pbrt-v4's `ConnectBDPT`); each returns the
+//! unweighted contribution, or nothing when it is zero or occluded:
+//!
+//! * s = 0: the camera subpath ends on an emitter: its radiance toward
+//!   z(t−2), times the camera throughput;
+//! * t = 1 (light tracing): a lens point chosen toward y(s−1)
+//!   (`Camera::sample_toward`); the contribution lands where that ray meets
+//!   the film, usually another pixel (a splat);
+//! * s = 1 (next-event estimation): a light picked by power and a point on
+//!   it drawn as the path tracer draws light samples (`Light::sample`: by
+//!   solid angle where it can), so the point is a fresh vertex;
+//! * otherwise: both BSDFs, the adjoint one at the light end, and the
+//!   geometry term |cos|·|cos|/d² with shading normals.
+
+use super::vertex::{Kind, Mode, Vertex};
+use super::Bdpt;
+use crate::light::{emitted, EnvAt, Target};
+use crate::sampler::{dim, Sampler};
+use glam::Vec3;
+
+/// A strategy's unweighted contribution.
+pub(super) struct Connection {
+    pub value: Vec3,
+    /// The vertex the strategy made afresh: the light point (s = 1) or the
+    /// lens point (t = 1).
+    pub sampled: Option<Vertex>,
+    /// Where a light-tracing contribution lands on the film (t = 1).
+    pub film: Option<(f32, f32)>,
+}
+
+impl Bdpt<'_> {
+    pub(super) fn connect(&self, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, sampler: &mut Sampler, rays: &mut u64) -> Option<Connection> {
+        let done = |value: Vec3, sampled: Option<Vertex>, film: Option<(f32, f32)>| {
+            (value.max_element() > 0.0 && value.is_finite()).then_some(Connection { value, sampled, film })
+        };
+        if s == 0 {
+            let z = &camera[t - 1];
+            if z.kind != Kind::Surface || z.light(self.lights).is_none() {
+                return None;
+            }
+            return done(z.beta * emitted(self.scene, &z.it, z.wo), None, None);
+        }
+        if t == 1 {
+            let y = &light[s - 1];
+            if !y.connectible() {
+                return None;
+            }
+            // A point light seen directly, or a rectangle that rays cannot
+            // hit: no camera ray sees them, and neither does this.
+            if let Kind::Light(k) = y.kind {
+                if !self.lights.lights[k].is_hittable() {
+                    return None;
+                }
+            }
+            let ls = self.camera.sample_toward(y.p(), sampler.get_2d(dim::light_vertex(s as u32 - 1, dim::LENS_CONNECT)))?;
+            let value = y.beta * y.f(ls.lens, Mode::Importance) * y.cos(ls.wi) * ls.weight;
+            if !(value.max_element() > 0.0) {
+                return None;
+            }
+            *rays += 1;
+            if self.accel.occluded(&y.it.spawn_ray_to(ls.lens)) {
+                return None;
+            }
+            let lens = Vertex::at_point(Kind::Camera, ls.lens, self.camera.view_axis(), ls.lens.abs().max_element(), u32::MAX, 0, Vec3::ONE, 0.0);
+            return done(value, Some(lens), Some(ls.film));
+        }
+        let z = &camera[t - 1];
+        if !z.connectible() {
+            return None;
+        }
+        if s == 1 {
+            sampler.set_bounce(t as u32 - 1);
+            let (k, pmf) = self.power.pick(sampler.slot_1d(dim::CONNECT_PICK, 0))?;
+            let l = &self.lights.lights[k];
+            let ls = l.sample(self.scene, z.p(), sampler.slot_2d(dim::CONNECT_POINT, 0), sampler.slot_1d(dim::CONNECT_SELECT, 0), EnvAt::Map)?;
+            let Target::Point(target) = ls.target else { return None };
+            if !(ls.pdf > 0.0) {
+                return None;
+            }
+            let n = l.normal_at(self.scene, target, ls.prim);
+            let value = z.beta * z.f(target, Mode::Radiance) * z.cos(ls.wi) * ls.value / (ls.pdf * pmf);
+            if !(value.max_element() > 0.0) {
+                return None;
+            }
+            *rays += 1;
+            if self.accel.occluded(&z.it.spawn_ray_to(target)) {
+                return None;
+            }
+            let geom = match l {
+                crate::light::Light::Mesh { geom_id, .. } => *geom_id,
+                _ => u32::MAX,
+            };
+            let origin_pdf = pmf * l.emission_pdf_pos();
+            let y0 = Vertex::at_point(Kind::Light(k), target, n, target.abs().max_element(), geom, ls.prim, ls.value / (ls.pdf * pmf), origin_pdf);
+            return done(value, Some(y0), None);
+        }
+        let y = &light[s - 1];
+        if !y.connectible() {
+            return None;
+        }
+        let d = y.p() - z.p();
+        let d2 = d.length_squared();
+        if !(d2 > 0.0) {
+            return None;
+        }
+        let w = d / d2.sqrt();
+        let g = y.cos(w) * z.cos(w) / d2;
+        let value = y.beta * y.f(z.p(), Mode::Importance) * z.f(y.p(), Mode::Radiance) * z.beta * g;
+        if !(value.max_element() > 0.0) {
+            return None;
+        }
+        *rays += 1;
+        if self.accel.occluded(&z.it.spawn_ray_to(y.offset_toward(z.p()))) {
+            return None;
+        }
+        done(value, None, None)
+    }
+}

@@ -1,0 +1,145 @@
+//! Multiple importance sampling over every strategy (s, t) that can make a
+//! path: Veach's **power heuristic** (β = 2), computed from ratios of
+//! neighbouring strategies' path densities, as pbrt-v4's `MISWeight` does
+//! for the balance heuristic.
+//!
+//! Strategy (s, t) and (s+1, t−1) differ only in how one vertex was made,
+//! so their path densities differ by that vertex's `pdf_rev / pdf_fwd`; a
+//! running product over the path gives every strategy's density relative to
+//! the one used, and the weight is 1 / (1 + Σ ratio²). A delta vertex has
+//! both densities 0, read as 1 so that it cancels from the products, while
+//! any strategy that would connect at it (or at a delta neighbour) is left
+//! out of the sum.
+//!
+//! Why the power heuristic: it is the path tracer's (NEE against BSDF
+//! samples), so BDPT restricted to s ≤ 1 weighs those two techniques the
+//! way the path tracer does, and Veach (thesis §9.2.4) found it better than
+//! the balance heuristic where one technique is much better than the others
+//! — the caustics this integrator exists for. pbrt-v4 uses the balance heuristic.
+//!
+//! Sample counts: a pixel takes n camera samples, but light tracing (t = 1)
+//! spreads all light subpaths over the whole film, so over a `-p` cell of
+//! `share` of the frame's pixels the pixel gets share·n light-tracing
+//! samples. The balance of counts enters the t = 1 ratios (Veach's n_k p_k),
+//! as in pbrt-v4 after its issue 347, with the factor on the side the count
+//! belongs to.
+//!
+//! The density of a next-event connection's light point (s = 1) enters as
+//! the light's pick probability × its area density, although the point was
+//! drawn by solid angle (as pbrt-v4 does): the weights are still a function
+//! of the path alone, so they sum to 1 over the strategies and the estimate
+//! stays unbiased; they are only not exactly the heuristic for that technique.
+//! Russian roulette is left out of the densities for the same reason.
+
+use super::vertex::{Kind, Vertex};
+use super::Bdpt;
+
+/// A vertex's densities and delta flag, as one strategy sees them.
+#[derive(Clone, Copy)]
+struct Densities {
+    fwd: f32,
+    rev: f32,
+    delta: bool,
+}
+
+impl Densities {
+    fn of(v: &Vertex) -> Densities {
+        Densities { fwd: v.pdf_fwd, rev: v.pdf_rev, delta: v.delta }
+    }
+}
+
+/// 0 read as 1: a delta vertex's densities cancel from the ratios.
+fn remap0(x: f32) -> f32 {
+    if x != 0.0 {
+        x
+    } else {
+        1.0
+    }
+}
+
+impl Bdpt<'_> {
+    /// The weight of strategy (s, t) for the path `light[..s]` + `camera[..t]`,
+    /// with `sampled` standing for `light[0]` (s = 1: the next-event light
+    /// point) or `camera[0]` (t = 1: the lens point chosen toward the scene).
+    pub(super) fn mis_weight(&self, light: &[Vertex], camera: &[Vertex], sampled: Option<&Vertex>, s: usize, t: usize) -> f32 {
+        if s + t == 2 {
+            return 1.0;
+        }
+        // At most -m + 2 vertices a side: on the stack for the usual depths.
+        let mut cam: smallvec::SmallVec<[Densities; 16]> = camera[..t].iter().map(Densities::of).collect();
+        let mut lig: smallvec::SmallVec<[Densities; 16]> = light[..s].iter().map(Densities::of).collect();
+        let pick = |i: usize, side: &[Vertex], first_sampled: bool| -> Vertex {
+            match (i, first_sampled, sampled) {
+                (0, true, Some(v)) => *v,
+                _ => side[i],
+            }
+        };
+        let zt = pick(t - 1, camera, t == 1);
+        if t == 1 {
+            cam[0] = Densities::of(&zt);
+        }
+        let ys = (s > 0).then(|| pick(s - 1, light, s == 1));
+        if s == 1 {
+            lig[0] = Densities::of(ys.as_ref().expect("s = 1"));
+        }
+        // The connection's ends are not deltas for this strategy.
+        cam[t - 1].delta = false;
+        if s > 0 {
+            lig[s - 1].delta = false;
+        }
+        let (lights, camera_model) = (self.lights, self.camera);
+        // z(t-1) made from the light side.
+        cam[t - 1].rev = match &ys {
+            Some(y) => y.pdf(lights, camera_model, (s > 1).then(|| &light[s - 2]), &zt),
+            None => zt.pdf_light_origin(lights, &self.power),
+        };
+        // z(t-2) made from z(t-1).
+        if t > 1 {
+            cam[t - 2].rev = match &ys {
+                Some(y) => zt.pdf(lights, camera_model, Some(y), &camera[t - 2]),
+                None => zt.pdf_light(lights, &camera[t - 2]),
+            };
+        }
+        if let Some(y) = &ys {
+            // y(s-1) made from the camera side, and y(s-2) from y(s-1).
+            lig[s - 1].rev = zt.pdf(lights, camera_model, (t > 1).then(|| &camera[t - 2]), y);
+            if s > 1 {
+                lig[s - 2].rev = y.pdf(lights, camera_model, Some(&zt), &light[s - 2]);
+            }
+        }
+        let share = self.light_tracing_share;
+        let mut sum = 0.0f64;
+        // Strategies with fewer camera vertices: (s + t − i, i).
+        let mut r = 1.0f64;
+        for i in (1..t).rev() {
+            r *= remap0(cam[i].rev) as f64 / remap0(cam[i].fwd) as f64;
+            if !cam[i].delta && !cam[i - 1].delta {
+                let term = if i == 1 { r * share } else { r };
+                sum += term * term;
+            }
+        }
+        // Strategies with fewer light vertices: (i, s + t − i).
+        let count = if t == 1 { 1.0 / share } else { 1.0 };
+        let mut r = 1.0f64;
+        for i in (0..s).rev() {
+            r *= remap0(lig[i].rev) as f64 / remap0(lig[i].fwd) as f64;
+            let before_is_delta = if i > 0 {
+                lig[i - 1].delta
+            } else {
+                // s' = 0: the camera path must hit the light by chance.
+                let y0 = pick(0, light, s == 1);
+                !matches!(y0.kind, Kind::Light(k) if lights.lights[k].is_hittable())
+            };
+            if !lig[i].delta && !before_is_delta {
+                let term = r * count;
+                sum += term * term;
+            }
+        }
+        let w = 1.0 / (1.0 + sum);
+        if w.is_finite() {
+            w as f32
+        } else {
+            0.0
+        }
+    }
+}

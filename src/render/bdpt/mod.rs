@@ -1,0 +1,181 @@
+//! Bidirectional path tracing (`--integrator bdpt`, Veach ch. 10, after
+//! pbrt-v4's `BDPTIntegrator`) and light tracing (`--integrator light`, the
+//! t = 1 strategies alone, as Mitsuba 3's `ptracer`: like it, blind to what
+//! the camera sees in or through mirrors and glass, since no connection
+//! can end at a delta vertex).
+//!
+//! Each pixel sample traces a camera subpath from its camera ray and a light
+//! subpath from a light (`subpath`), then joins every prefix of one to every
+//! prefix of the other (`connect`): strategy (s, t) uses s light vertices
+//! and t camera vertices, a path of s + t − 2 bounces. Each strategy's
+//! contribution is weighted against all the others that could have made the
+//! same path (`mis`, the power heuristic), so their sum estimates the image.
+//! Light-tracing strategies (t = 1) land on whatever pixel their ray meets,
+//! as splats (`render::splat`), kept in exact sums so that renders split by
+//! samples merge to the bits of one render.
+//!
+//! Conventions shared with the path tracer (`render::path`):
+//! * `-m` bounds s + t − 2 (0: emitters seen directly, 1: direct light);
+//!   `-o 0` keeps only paths of exactly `-m` bounces;
+//! * the same BSDFs and lights, emission one-sided, glass scaling radiance
+//!   by (η_i/η_t)² on camera subpaths (and importance unscaled on light
+//!   subpaths: `vertex`);
+//! * draws addressed by dimension id (`sampler::dim`), so the image does not
+//!   depend on threads or on how the samples are split.
+//!
+//! Differences from pbrt-v4: the power heuristic (`mis`); Veach's adjoint
+//! shading-normal correction on light subpaths (pbrt-v4 omits it, which its
+//! users found makes BDPT and path tracing disagree); Russian roulette on
+//! both subpaths (`subpath`); next-event points drawn by solid angle
+//! (`connect`); exact splats. Not supported, and refused by the command
+//! line with a line naming them: lights at infinity (directional,
+//! hemisphere, environment map), adaptive sampling (`-a`: a pixel's
+//! stopping rule cannot see the light its neighbours' samples splat into
+//! it) and tile splits (a tile's light subpaths light other tiles).
+//!
+//! CS184 has no bidirectional integrator.
+
+mod connect;
+mod mis;
+mod subpath;
+mod vertex;
+
+use super::splat::Splat;
+use super::{Integrator, Region};
+use crate::accel::{Hit, Traversal};
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::light::emission::LightPower;
+use crate::light::Lights;
+use crate::ray::Ray;
+use crate::sampler::Sampler;
+use crate::scene::Scene;
+use glam::Vec3;
+use vertex::Vertex;
+
+/// Which strategies a render sums.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Technique {
+    /// Every strategy, weighted by multiple importance sampling.
+    Bidirectional,
+    /// Light tracing alone: the strategies (s ≥ 1, t = 1), unweighted.
+    LightTracing,
+    /// One strategy (s, t) of the bidirectional path tracer, weighted as in
+    /// the full sum or not: pbrt-v4's strategy images, for tests and
+    /// debugging (`--bdpt-strategy S,T`).
+    Strategy { s: usize, t: usize, weighted: bool },
+}
+
+pub struct Bdpt<'a> {
+    scene: &'a Scene,
+    accel: &'a dyn Traversal,
+    lights: &'a Lights,
+    camera: &'a Camera,
+    max_depth: u32,
+    accumulate: bool,
+    technique: Technique,
+    power: LightPower,
+    /// The frame's size in pixels, where splats land.
+    width: u32,
+    height: u32,
+    /// Pixels rendered ÷ pixels of the frame: light tracing's sample count
+    /// per pixel relative to the camera's (see `mis`).
+    light_tracing_share: f64,
+}
+
+impl<'a> Bdpt<'a> {
+    /// The integrator for a render of `region` of a `width`×`height` frame.
+    /// Refuses lights it cannot start paths from (those at infinity).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        scene: &'a Scene,
+        accel: &'a dyn Traversal,
+        lights: &'a Lights,
+        camera: &'a Camera,
+        width: u32,
+        height: u32,
+        region: Region,
+        max_depth: u32,
+        accumulate: bool,
+        technique: Technique,
+    ) -> Result<Bdpt<'a>> {
+        if let Some(l) = lights.lights.iter().find(|l| !l.emits_rays()) {
+            crate::bail!(
+                "{}: the {} is a light at infinity, which the bidirectional and light-tracing integrators do not support yet; use --integrator path",
+                scene.source,
+                l.describe()
+            );
+        }
+        let power = LightPower::new(&lights.lights);
+        let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
+        Ok(Bdpt { scene, accel, lights, camera, max_depth, accumulate, technique, power, width, height, light_tracing_share })
+    }
+
+    /// Whether strategy (s, t) is summed.
+    fn uses(&self, s: usize, t: usize) -> bool {
+        let depth = s as i64 + t as i64 - 2;
+        if depth < 0 || depth > self.max_depth as i64 || (!self.accumulate && depth != self.max_depth as i64) {
+            return false;
+        }
+        match self.technique {
+            Technique::Bidirectional => !(s == 1 && t == 1),
+            Technique::LightTracing => t == 1 && s >= 1,
+            Technique::Strategy { s: ss, t: tt, .. } => (s, t) == (ss, tt) && !(s == 1 && t == 1),
+        }
+    }
+
+    fn weighted(&self) -> bool {
+        match self.technique {
+            Technique::Bidirectional => true,
+            Technique::LightTracing => false,
+            Technique::Strategy { weighted, .. } => weighted,
+        }
+    }
+}
+
+impl Integrator for Bdpt<'_> {
+    fn accel(&self) -> &dyn Traversal {
+        self.accel
+    }
+
+    fn splats(&self) -> bool {
+        true
+    }
+
+    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
+        // Without a film for splats, only the camera strategies count.
+        self.radiance_splat(ray, hit, sampler, rays, &mut Vec::new())
+    }
+
+    fn radiance_splat(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
+        let m = self.max_depth as usize;
+        let camera_vertices = match self.technique {
+            Technique::LightTracing => 1,
+            _ => m + 2,
+        };
+        let mut camera: Vec<Vertex> = Vec::with_capacity(camera_vertices);
+        let mut light: Vec<Vertex> = Vec::with_capacity(m + 1);
+        self.camera_subpath(ray, hit, sampler, &mut camera, camera_vertices, rays);
+        self.light_subpath(sampler, &mut light, m + 1, rays);
+        let mut l = Vec3::ZERO;
+        for t in 1..=camera.len() {
+            for s in 0..=light.len() {
+                if !self.uses(s, t) {
+                    continue;
+                }
+                let Some(c) = self.connect(&light, &camera, s, t, sampler, rays) else { continue };
+                let w = if self.weighted() { self.mis_weight(&light, &camera, c.sampled.as_ref(), s, t) } else { 1.0 };
+                let value = c.value * w;
+                match c.film {
+                    Some((x, y)) => splats.push(Splat {
+                        x: ((x * self.width as f32) as u32).min(self.width - 1),
+                        y: ((y * self.height as f32) as u32).min(self.height - 1),
+                        l: value,
+                    }),
+                    None => l += value,
+                }
+            }
+        }
+        l
+    }
+}

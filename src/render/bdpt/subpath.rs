@@ -1,0 +1,148 @@
+//! Camera and light subpaths: random walks that record each vertex's
+//! throughput and both densities (`vertex`).
+//!
+//! * The camera subpath starts with the lens point and the camera ray the
+//!   image loop traced; its walk samples BSDFs in `Mode::Radiance`, as the
+//!   path tracer does (same draws: `dim::BSDF_LOBE`, `dim::BSDF`,
+//!   `dim::RUSSIAN_ROULETTE` at vertex `bounce`).
+//! * The light subpath starts on a light picked by power
+//!   (`emission::LightPower`), with a point and a cosine-weighted direction
+//!   (`Light::sample_emission`); its walk scatters with the adjoint BSDF
+//!   (`Mode::Importance`) and draws from its own dimension ids
+//!   (`dim::light_vertex`).
+//! * Russian roulette on both, from the third vertex on: the path tracer's
+//!   weight window (continue for sure at a throughput of at least 1/4 of
+//!   the start's, else with probability throughput / floor, the survivor's
+//!   throughput divided by it). The camera side divides out the η² its
+//!   radiance carries through glass, as the path tracer does. Survival is not
+//!   in the densities (see `mis`). pbrt-v4's BDPT has no roulette.
+//! * Paths that leave the scene end: the lights at infinity are not
+//!   supported by this integrator (the command line refuses them).
+
+use super::vertex::{Kind, Mode, Vertex};
+use super::Bdpt;
+use crate::accel::Hit;
+use crate::ray::Ray;
+use crate::sampler::{dim, Sampler};
+use crate::scene::Interaction;
+use glam::Vec3;
+
+/// See the module comment.
+const RR_WEIGHT_FLOOR: f32 = 0.25;
+
+impl Bdpt<'_> {
+    /// The camera subpath of camera ray `ray` (whose closest hit is `hit`):
+    /// at most `max` vertices, the lens point first.
+    pub(super) fn camera_subpath(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, path: &mut Vec<Vertex>, max: usize, rays: &mut u64) {
+        path.clear();
+        let dir = ray.dir.normalize();
+        let axis = self.camera.view_axis();
+        path.push(Vertex::at_point(Kind::Camera, ray.origin, axis, ray.origin.abs().max_element(), u32::MAX, 0, Vec3::ONE, 1.0));
+        if max < 2 {
+            return;
+        }
+        let pdf_dir = self.camera.pdf_dir(ray.origin, dir);
+        let first = Ray { dir, tmin: ray.tmin * ray.dir.length(), tmax: ray.tmax * ray.dir.length(), ..*ray };
+        self.walk(first, Some(hit), Vec3::ONE, pdf_dir, Mode::Radiance, sampler, path, max, rays);
+    }
+
+    /// The light subpath of this pixel sample: at most `max` vertices, the
+    /// light's point first (none when no light emits).
+    pub(super) fn light_subpath(&self, sampler: &mut Sampler, path: &mut Vec<Vertex>, max: usize, rays: &mut u64) {
+        path.clear();
+        if max == 0 {
+            return;
+        }
+        let draw2 = |slot| sampler.get_2d(dim::light_vertex(0, slot));
+        let Some((k, pmf)) = self.power.pick(sampler.get_1d(dim::light_vertex(0, dim::EMIT_PICK))) else { return };
+        let light = &self.lights.lights[k];
+        let Some(e) = light.sample_emission(self.scene, sampler.get_1d(dim::light_vertex(0, dim::EMIT_SELECT)), draw2(dim::EMIT_POINT), draw2(dim::EMIT_DIRECTION)) else { return };
+        let origin_pdf = pmf * e.pdf_pos;
+        let geom = match light {
+            crate::light::Light::Mesh { geom_id, .. } => *geom_id,
+            _ => u32::MAX,
+        };
+        let y0 = Vertex::at_point(Kind::Light(k), e.p, e.n, e.magnitude, geom, e.prim, e.le / origin_pdf, origin_pdf);
+        path.push(y0);
+        if max < 2 {
+            return;
+        }
+        let cos = if e.n == Vec3::ZERO { 1.0 } else { e.n.dot(e.dir).abs() };
+        let beta = e.le * cos / (origin_pdf * e.pdf_dir);
+        if !beta.is_finite() || beta == Vec3::ZERO {
+            return;
+        }
+        let ray = y0.it.spawn_ray(e.dir);
+        self.walk(ray, None, beta, e.pdf_dir, Mode::Importance, sampler, path, max, rays);
+    }
+
+    /// Extend `path` from its last vertex along `ray` (unit direction, drawn
+    /// with solid-angle density `pdf_dir`; `first`: its hit, already traced)
+    /// with throughput `beta`, until `max` vertices, an escape, an absorption
+    /// or Russian roulette.
+    #[allow(clippy::too_many_arguments)]
+    fn walk(&self, mut ray: Ray, mut first: Option<Option<Hit>>, mut beta: Vec3, mut pdf_dir: f32, mode: Mode, sampler: &mut Sampler, path: &mut Vec<Vertex>, max: usize, rays: &mut u64) {
+        let beta_start = beta.max_element();
+        let mut radiance_scale = 1.0f32;
+        loop {
+            let hit = match first.take() {
+                Some(h) => h,
+                None => {
+                    *rays += 1;
+                    self.accel.intersect(&ray)
+                }
+            };
+            let Some(hit) = hit else { return };
+            let it = Interaction::with_barycentrics(self.scene, &ray, &hit, self.accel.exact_barycentrics());
+            let prev_p = path.last().expect("a subpath starts with its end point").p();
+            let mut v = Vertex::surface(self.scene, it, -ray.dir, beta);
+            v.pdf_fwd = v.convert(pdf_dir, prev_p);
+            path.push(v);
+            let i = path.len() - 1;
+            if path.len() >= max {
+                return;
+            }
+            let Some(bsdf) = v.bsdf else { return };
+            let draw = |slot: u32| match mode {
+                Mode::Radiance => dim::at_bounce(i as u32, slot, 0),
+                Mode::Importance => dim::light_vertex(i as u32, slot),
+            };
+            let wo = v.frame.to_local(v.wo);
+            let (lobe, u) = bsdf.draws();
+            let lobe = if lobe { sampler.get_1d(draw(dim::BSDF_LOBE)) } else { 0.0 };
+            let u = if u { sampler.get_2d(draw(dim::BSDF)) } else { (0.0, 0.0) };
+            let Some(bs) = bsdf.sample_with(wo, lobe, u) else { return };
+            let wi = v.frame.to_world(bs.wi).normalize();
+            let mut weight = bs.weight;
+            match mode {
+                Mode::Radiance => radiance_scale *= bs.radiance_scale,
+                // Importance is not scaled at a crossing; the adjoint's
+                // shading-normal correction.
+                Mode::Importance => weight *= v.shading_correction(wi) / bs.radiance_scale,
+            }
+            beta *= weight;
+            let (fwd, rev) = if bs.delta { (0.0, 0.0) } else { (bs.pdf, bsdf.pdf(bs.wi, wo)) };
+            path[i].delta = bs.delta;
+            let p = v.p();
+            path[i - 1].pdf_rev = path[i - 1].convert(rev, p);
+            if i >= 2 {
+                let level = match mode {
+                    Mode::Radiance => beta.max_element() / radiance_scale,
+                    Mode::Importance => beta.max_element() / beta_start,
+                };
+                if level < RR_WEIGHT_FLOOR {
+                    let q = level / RR_WEIGHT_FLOOR;
+                    if !(sampler.get_1d(draw(dim::RUSSIAN_ROULETTE)) < q) {
+                        return;
+                    }
+                    beta /= q;
+                }
+            }
+            if !(beta.max_element() > 0.0) || !beta.is_finite() {
+                return;
+            }
+            pdf_dir = fwd;
+            ray = v.it.spawn_ray(wi);
+        }
+    }
+}

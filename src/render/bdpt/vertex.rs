@@ -1,0 +1,225 @@
+//! A vertex of a camera or light subpath, with the two densities the MIS
+//! weights need (Veach's thesis ch. 10, pbrt-v4's `Vertex`):
+//!
+//! * `pdf_fwd`: the area density of this vertex, generated from its
+//!   predecessor on its own subpath;
+//! * `pdf_rev`: the area density of the same vertex generated from its
+//!   successor, as if the path had been traced from the other end.
+//!
+//! Area densities convert solid-angle ones by |cos θ| at the vertex (its
+//! geometric normal) / distance²; the camera and point lights have no
+//! surface, so no cosine. A delta (specular) vertex has both densities 0,
+//! which the weights read as "cancels out" (see `mis`).
+//!
+//! Light subpaths scatter with the adjoint BSDF (`f` with `Mode::Importance`):
+//! Veach's shading-normal correction |wo·ns||wi·ng| / (|wo·ng||wi·ns|)
+//! (thesis §5.3; pbrt-v3 and Mitsuba 3 apply it, pbrt-v4 omits it), and no
+//! (η_i/η_t)² on refraction (radiance is scaled at a crossing, importance
+//! is not).
+
+use crate::bsdf::Bsdf;
+use crate::light::Lights;
+use crate::light::emission::LightPower;
+use crate::sampling::{offset_ray_origin, Frame};
+use crate::scene::{Interaction, Scene};
+use glam::Vec3;
+
+/// Which end of the transport a subpath starts from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Mode {
+    /// Camera subpaths: radiance flows toward the camera.
+    Radiance,
+    /// Light subpaths: importance flows toward the lights.
+    Importance,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Kind {
+    /// A point on the lens (or the pinhole).
+    Camera,
+    /// A point on light `k` (`Lights::lights[k]`) where a light subpath or
+    /// a next-event connection starts.
+    Light(usize),
+    /// A surface a subpath reached.
+    Surface,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Vertex {
+    pub kind: Kind,
+    /// The point, its geometric normal as wound (a light: its emitting side;
+    /// the camera: the view axis; a point light: zero), its primitive.
+    pub it: Interaction,
+    /// The shading frame, its z turned to the side of `wo`.
+    pub frame: Frame,
+    /// Unit direction toward the predecessor on the subpath (world).
+    pub wo: Vec3,
+    pub bsdf: Option<Bsdf>,
+    /// The subpath's throughput up to and including this vertex's arrival.
+    pub beta: Vec3,
+    pub pdf_fwd: f32,
+    pub pdf_rev: f32,
+    /// Scattered by a delta lobe (so nothing connects through it).
+    pub delta: bool,
+}
+
+impl Vertex {
+    /// A vertex that is not a surface: the lens point `p`, or a light's
+    /// point `p` with emitting normal `n` (zero for a point light).
+    pub fn at_point(kind: Kind, p: Vec3, n: Vec3, magnitude: f32, geom_id: u32, prim_id: u32, beta: Vec3, pdf_fwd: f32) -> Vertex {
+        let it = Interaction { p, ng: n, ns: n, t: 0.0, magnitude, geom_id, prim_id };
+        let frame = Frame::new(if n == Vec3::ZERO { Vec3::Z } else { n });
+        Vertex { kind, it, frame, wo: Vec3::ZERO, bsdf: None, beta, pdf_fwd, pdf_rev: 0.0, delta: false }
+    }
+
+    /// The surface at `it`, reached along `-wo`: normals turned to `wo`'s
+    /// side as the path tracer turns them (an interpolated normal past the
+    /// face falls back to the face's).
+    pub fn surface(scene: &Scene, it: Interaction, wo: Vec3, beta: Vec3) -> Vertex {
+        let front = it.ng.dot(wo) >= 0.0;
+        let flip = if front { 1.0 } else { -1.0 };
+        let ng = it.ng * flip;
+        let mut ns = it.ns * flip;
+        if ns.dot(ng) <= 0.0 {
+            ns = ng;
+        }
+        let bsdf = Bsdf::of(&scene.material_of(it.geom_id).bsdf, front);
+        Vertex { kind: Kind::Surface, it, frame: Frame::new(ns), wo, bsdf, beta, pdf_fwd: 0.0, pdf_rev: 0.0, delta: false }
+    }
+
+    pub fn p(&self) -> Vec3 {
+        self.it.p
+    }
+
+    /// Whether densities arriving here are per area of a surface (with a
+    /// cosine): surfaces and area lights, not the camera or point lights.
+    fn has_normal(&self) -> bool {
+        match self.kind {
+            Kind::Surface => true,
+            Kind::Light(_) => self.it.ng != Vec3::ZERO,
+            Kind::Camera => false,
+        }
+    }
+
+    /// Whether a connection can end here: the camera, a light, a surface
+    /// with a non-delta BSDF.
+    pub fn connectible(&self) -> bool {
+        match self.kind {
+            Kind::Camera | Kind::Light(_) => true,
+            Kind::Surface => self.bsdf.is_some_and(|b| !b.is_delta()),
+        }
+    }
+
+    /// The area density here of a solid-angle density `pdf` at `from`.
+    pub fn convert(&self, pdf: f32, from: Vec3) -> f32 {
+        let d = self.p() - from;
+        let d2 = d.length_squared();
+        if !(d2 > 0.0) {
+            return 0.0;
+        }
+        let cos = if self.has_normal() { self.it.ng.dot(d).abs() / d2.sqrt() } else { 1.0 };
+        pdf * cos / d2
+    }
+
+    /// |cos| between the shading normal (a light's normal; 1 for a point
+    /// light) and unit direction `w`.
+    pub fn cos(&self, w: Vec3) -> f32 {
+        match self.kind {
+            Kind::Surface => self.frame.n.dot(w).abs(),
+            _ if self.it.ng == Vec3::ZERO => 1.0,
+            _ => self.it.ng.dot(w).abs(),
+        }
+    }
+
+    /// The BSDF from `wo` toward point `q` (without the cosine), adjoint in
+    /// `Mode::Importance`. At a light vertex: 1 on the emitting side (the
+    /// emitters are Lambertian, so the direction changes nothing else).
+    pub fn f(&self, q: Vec3, mode: Mode) -> Vec3 {
+        let wi = (q - self.p()).normalize_or_zero();
+        match self.kind {
+            Kind::Surface => {
+                let Some(b) = &self.bsdf else { return Vec3::ZERO };
+                let f = b.eval(self.frame.to_local(self.wo), self.frame.to_local(wi));
+                match mode {
+                    Mode::Radiance => f,
+                    Mode::Importance => f * self.shading_correction(wi),
+                }
+            }
+            Kind::Light(_) => {
+                if self.it.ng == Vec3::ZERO || self.it.ng.dot(wi) > 0.0 {
+                    Vec3::ONE
+                } else {
+                    Vec3::ZERO
+                }
+            }
+            Kind::Camera => Vec3::ZERO,
+        }
+    }
+
+    /// Veach's adjoint correction for shading normals, |wo·ns||wi·ng| /
+    /// (|wo·ng||wi·ns|): without it a light subpath over interpolated
+    /// normals does not converge to what the camera sees.
+    pub fn shading_correction(&self, wi: Vec3) -> f32 {
+        let (ns, ng) = (self.frame.n, self.it.ng);
+        let den = self.wo.dot(ng).abs() * wi.dot(ns).abs();
+        if den > 0.0 {
+            self.wo.dot(ns).abs() * wi.dot(ng).abs() / den
+        } else {
+            0.0
+        }
+    }
+
+    /// The area density with which this vertex, having been reached from
+    /// `prev` (ignored by the camera and lights), generates `next`.
+    pub fn pdf(&self, lights: &Lights, camera: &crate::camera::Camera, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+        let w = (next.p() - self.p()).normalize_or_zero();
+        let pdf_dir = match self.kind {
+            Kind::Camera => camera.pdf_dir(self.p(), w),
+            Kind::Light(k) => lights.lights[k].emission_pdf_dir(self.it.ng, w),
+            Kind::Surface => {
+                let (Some(b), Some(prev)) = (&self.bsdf, prev) else { return 0.0 };
+                let wo = (prev.p() - self.p()).normalize_or_zero();
+                b.pdf(self.frame.to_local(wo), self.frame.to_local(w))
+            }
+        };
+        next.convert(pdf_dir, self.p())
+    }
+
+    /// The light this vertex lies on: a light vertex's, or the emitter a
+    /// surface vertex hit.
+    pub fn light(&self, lights: &Lights) -> Option<usize> {
+        match self.kind {
+            Kind::Light(k) => Some(k),
+            Kind::Surface => lights.of_geometry.get(self.it.geom_id as usize).copied().flatten(),
+            Kind::Camera => None,
+        }
+    }
+
+    /// The area density of this emitter point as the start of a light
+    /// subpath: the light's pick probability × its position density.
+    pub fn pdf_light_origin(&self, lights: &Lights, power: &LightPower) -> f32 {
+        match self.light(lights) {
+            Some(k) => power.pmf(k) * lights.lights[k].emission_pdf_pos(),
+            None => 0.0,
+        }
+    }
+
+    /// The area density of `next` as the second vertex of a light subpath
+    /// leaving this emitter point.
+    pub fn pdf_light(&self, lights: &Lights, next: &Vertex) -> f32 {
+        let Some(k) = self.light(lights) else { return 0.0 };
+        let w = (next.p() - self.p()).normalize_or_zero();
+        next.convert(lights.lights[k].emission_pdf_dir(self.it.ng, w), self.p())
+    }
+
+    /// A point just off this vertex's surface toward `toward`, as a shadow
+    /// segment's end.
+    pub fn offset_toward(&self, toward: Vec3) -> Vec3 {
+        let n = self.it.ng;
+        if n == Vec3::ZERO {
+            return self.p();
+        }
+        let side = if (toward - self.p()).dot(n) >= 0.0 { n } else { -n };
+        offset_ray_origin(self.p(), side, self.it.magnitude)
+    }
+}

@@ -1,0 +1,275 @@
+//! Bidirectional path tracing and light tracing, against the path tracer
+//! (an independent estimator of the same integral: the two share nothing but
+//! the BSDFs and lights), against closed forms, and against themselves.
+//!
+//! Splats make neighbouring pixels' errors correlated (one light subpath
+//! lands on many pixels), so the per-pixel variances do not give the
+//! variance of a region's mean. Every comparison here therefore renders
+//! independent replicates (seeds) and tests the difference of the replicate
+//! means with Welch's t: the spread is measured, not modelled. Each test's
+//! family of comparisons shares alpha = 0.01 (Šidák), and checks its power
+//! (the standard error must resolve a few per cent).
+
+mod common;
+
+use common::{camera_at, diffuse, flat_cube_mesh, scene_of, sidak, Scratch};
+use glam::Vec3;
+use pathtracer::accel::BackendKind;
+use pathtracer::camera::Camera;
+use pathtracer::light::Lights;
+use pathtracer::render::bdpt::{Bdpt, Technique};
+use pathtracer::render::path::PathTracer;
+use pathtracer::render::{self, Integrator, Region, RenderSettings};
+use pathtracer::scene::{Scene, Shape};
+use statrs::distribution::{ContinuousCDF, StudentsT};
+use std::path::Path;
+use std::process::Command;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Estimator {
+    Path,
+    Bdpt(Technique),
+}
+
+/// A render's image (luminance as the channel mean, row 0 at the top).
+fn render_image(scene: &Scene, cam: &Camera, backend: BackendKind, est: Estimator, m: u32, accumulate: bool, spp: u32, seed: u64) -> Vec<f64> {
+    let lights = Lights::from_scene(scene).unwrap();
+    let accel = common::build(backend, &scene.shapes);
+    let (w, h) = (cam.screen_w, cam.screen_h);
+    let integ: Box<dyn Integrator> = match est {
+        Estimator::Path => Box::new(PathTracer { scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate, hemisphere: false, light_samples: 1, russian_roulette: true }),
+        Estimator::Bdpt(t) => Box::new(Bdpt::new(scene, accel.as_ref(), &lights, cam, w, h, Region { x: 0, y: 0, w, h }, m, accumulate, t).unwrap()),
+    };
+    let out = render::render(cam, integ.as_ref(), &RenderSettings::new(w, h, spp, seed));
+    assert!(out.image.pixels.iter().all(|p| p.is_finite()), "{est:?}: a non-finite pixel");
+    out.image.pixels.iter().map(|p| (p.x as f64 + p.y as f64 + p.z as f64) / 3.0).collect()
+}
+
+/// Per replicate: the image mean and the means of a 4x4 grid of blocks.
+fn replicate_means(img: &[f64], w: u32, h: u32) -> Vec<f64> {
+    let mut out = vec![img.iter().sum::<f64>() / img.len() as f64];
+    let (bw, bh) = (w / 4, h / 4);
+    for by in 0..4 {
+        for bx in 0..4 {
+            let mut s = 0.0;
+            for y in by * bh..(by + 1) * bh {
+                for x in bx * bw..(bx + 1) * bw {
+                    s += img[(y * w + x) as usize];
+                }
+            }
+            out.push(s / (bw * bh) as f64);
+        }
+    }
+    out
+}
+
+/// `k` replicates' region means.
+#[allow(clippy::too_many_arguments)]
+fn replicates(scene: &Scene, cam: &Camera, backend: BackendKind, est: Estimator, m: u32, accumulate: bool, spp: u32, k: u64, seed: u64) -> Vec<Vec<f64>> {
+    (0..k).map(|i| replicate_means(&render_image(scene, cam, backend, est, m, accumulate, spp, seed + 1000 * i), cam.screen_w, cam.screen_h)).collect()
+}
+
+fn mean_var(xs: impl Iterator<Item = f64> + Clone) -> (f64, f64, f64) {
+    let n = xs.clone().count() as f64;
+    let mean = xs.clone().sum::<f64>() / n;
+    let var = xs.map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
+    (mean, var / n, n)
+}
+
+/// Welch's t-test of every region mean (image, then 16 blocks; blocks
+/// darker than 2 % of the image are left to the image test) between two
+/// sets of replicates, at family-wise `alpha`; `power`: the image's
+/// standard error must be below this share of its mean.
+fn assert_agree(a: &[Vec<f64>], b: &[Vec<f64>], what: &str, power: f64) {
+    let regions = a[0].len();
+    let alpha = sidak(0.01, regions);
+    let image = a.iter().map(|r| r[0]).sum::<f64>() / a.len() as f64;
+    for j in 0..regions {
+        let (ma, va, na) = mean_var(a.iter().map(|r| r[j]));
+        let (mb, vb, nb) = mean_var(b.iter().map(|r| r[j]));
+        if j > 0 && ma < 0.02 * image {
+            continue;
+        }
+        let se = (va + vb).sqrt();
+        if j == 0 {
+            assert!(se < power * ma, "{what}: underpowered: image mean {ma:.5} with standard error {se:.5}");
+        }
+        // Welch–Satterthwaite degrees of freedom.
+        let df = (va + vb).powi(2) / (va * va / (na - 1.0) + vb * vb / (nb - 1.0));
+        let crit = StudentsT::new(0.0, 1.0, df.max(1.0)).unwrap().inverse_cdf(1.0 - alpha / 2.0);
+        let t = (ma - mb) / se;
+        let region = if j == 0 { "image".to_string() } else { format!("block {}", j - 1) };
+        assert!(t.abs() <= crit, "{what}: {region}: {ma:.5} vs {mb:.5} (se {se:.5}, t {t:.2} > {crit:.2})");
+    }
+}
+
+/// CS184's Cornell box with two diffuse spheres (the built-in scene), at
+/// the 800x600 view scaled down.
+fn cornell(w: u32, h: u32) -> (Scene, Camera) {
+    let scene = pathtracer::scene::builtin::load().unwrap();
+    shrunk(scene, w, h)
+}
+
+fn shrunk(scene: Scene, w: u32, h: u32) -> (Scene, Camera) {
+    let mut cam = Camera::from_scene(&scene);
+    cam.screen_dist *= w as f32 / 800.0;
+    cam.set_screen_size(w, h);
+    (scene, cam)
+}
+
+#[test]
+fn bdpt_and_light_tracing_agree_with_the_path_tracer_on_the_cornell_box() {
+    let (w, h) = (32, 24);
+    let (scene, cam) = cornell(w, h);
+    for m in [1u32, 4] {
+        let path = replicates(&scene, &cam, BackendKind::Native, Estimator::Path, m, true, 64, 12, 1);
+        let bdpt = replicates(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Bidirectional), m, true, 32, 12, 2);
+        assert_agree(&path, &bdpt, &format!("-m {m}: bdpt vs path"), 0.01);
+        let light = replicates(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::LightTracing), m, true, 64, 12, 3);
+        assert_agree(&path, &light, &format!("-m {m}: light tracing vs path"), 0.02);
+    }
+}
+
+#[test]
+fn bdpt_agrees_with_the_path_tracer_on_every_backend() {
+    let (w, h) = (32, 24);
+    let (scene, cam) = cornell(w, h);
+    let path = replicates(&scene, &cam, BackendKind::Native, Estimator::Path, 3, true, 64, 12, 4);
+    for backend in common::backends() {
+        let bdpt = replicates(&scene, &cam, backend, Estimator::Bdpt(Technique::Bidirectional), 3, true, 32, 12, 5);
+        assert_agree(&path, &bdpt, &format!("{backend}: bdpt vs path"), 0.01);
+    }
+}
+
+/// A shipped scene from ../shared (missing data fails loudly).
+fn shipped(name: &str, w: u32, h: u32) -> (Scene, Camera) {
+    shrunk(common::load(&common::scene_path("sky", name)), w, h)
+}
+
+#[test]
+fn bdpt_agrees_with_the_path_tracer_through_mirror_and_glass() {
+    let (w, h) = (32, 24);
+    let (scene, cam) = shipped("CBspheres", w, h);
+    let path = replicates(&scene, &cam, BackendKind::Native, Estimator::Path, 5, true, 128, 12, 6);
+    let bdpt = replicates(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Bidirectional), 5, true, 64, 12, 7);
+    assert_agree(&path, &bdpt, "CBspheres -m 5: bdpt vs path", 0.02);
+}
+
+#[test]
+fn bdpt_agrees_with_the_path_tracer_on_caustics_through_gems() {
+    let (w, h) = (32, 24);
+    let (scene, cam) = shipped("CBgems", w, h);
+    let path = replicates(&scene, &cam, BackendKind::Native, Estimator::Path, 5, true, 128, 12, 8);
+    let bdpt = replicates(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Bidirectional), 5, true, 64, 12, 9);
+    assert_agree(&path, &bdpt, "CBgems -m 5: bdpt vs path", 0.02);
+}
+
+#[test]
+fn bdpt_matches_the_furnace_closed_form() {
+    // A closed room whose walls emit Le and reflect rho: radiance
+    // Le (1 - rho^(k+1)) / (1 - rho) everywhere at -m k.
+    let (le, rho) = (1.0f32, 0.5f32);
+    let scene = scene_of(vec![(Shape::Mesh(flat_cube_mesh(1.0, Vec3::ZERO, true)), diffuse("wall", rho, le))], vec![]);
+    let mut cam = camera_at(&scene, Vec3::new(0.1, -0.2, 0.3), 16, 16);
+    (cam.screen_w, cam.screen_h) = (16, 16);
+    let ks = [1u32, 3];
+    let alpha = sidak(0.01, 2 * ks.len());
+    for k in ks {
+        let expect = le as f64 * (1.0 - (rho as f64).powi(k as i32 + 1)) / (1.0 - rho as f64);
+        for tech in [Technique::Bidirectional, Technique::LightTracing] {
+            let means: Vec<f64> = (0..12).map(|i| {
+                let img = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(tech), k, true, 16, 40 + i);
+                img.iter().sum::<f64>() / img.len() as f64
+            }).collect();
+            let (m, v, n) = mean_var(means.iter().copied());
+            let se = v.sqrt();
+            assert!(se < 0.01 * expect, "{tech:?} -m {k}: underpowered (se {se})");
+            let crit = StudentsT::new(0.0, 1.0, n - 1.0).unwrap().inverse_cdf(1.0 - alpha / 2.0);
+            assert!((m - expect).abs() <= crit * se, "{tech:?} -m {k}: {m:.5} ± {se:.5} vs {expect:.5}");
+        }
+    }
+}
+
+#[test]
+fn weighted_strategies_sum_to_the_full_image_and_each_alone_estimates_it() {
+    let (w, h) = (16, 12);
+    let (scene, cam) = cornell(w, h);
+    let m = 2u32;
+    // Same seed: every strategy image is made of the same subpaths and
+    // connections, so the weighted ones add up to the full render's pixels
+    // (up to the rounding of adding them in another order).
+    let full = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Bidirectional), m, true, 8, 77);
+    let mut sum = vec![0.0; full.len()];
+    let mut strategies = Vec::new();
+    for depth in 0..=m as usize {
+        for t in 1..=depth + 2 {
+            let s = depth + 2 - t;
+            if (s, t) == (1, 1) {
+                continue;
+            }
+            strategies.push((s, t));
+            let img = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Strategy { s, t, weighted: true }), m, true, 8, 77);
+            for (a, b) in sum.iter_mut().zip(&img) {
+                *a += b;
+            }
+        }
+    }
+    assert_eq!(strategies.len(), 1 + 3 + 4);
+    for (i, (a, b)) in sum.iter().zip(&full).enumerate() {
+        assert!((a - b).abs() <= 1e-4 * b.abs().max(1e-3), "pixel {i}: strategies sum to {a}, the full render has {b}");
+    }
+    // Unweighted, each depth-1 strategy alone estimates all of direct light:
+    // NEE (1,2), hitting the light (0,3) and light tracing (2,1).
+    let (w, h) = (32, 24);
+    let (scene, cam) = cornell(w, h);
+    let path = replicates(&scene, &cam, BackendKind::Native, Estimator::Path, 1, false, 64, 12, 11);
+    for (s, t, spp) in [(1usize, 2usize, 32u32), (0, 3, 256), (2, 1, 64)] {
+        let alone = replicates(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Strategy { s, t, weighted: false }), 1, false, spp, 12, 12 + s as u64);
+        assert_agree(&path, &alone, &format!("strategy ({s},{t}) alone vs path -m 1 -o 0"), 0.03);
+    }
+}
+
+fn pathtracer(dir: &Path, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_pathtracer")).current_dir(dir).args(args).env("CI", "1").output().expect("run pathtracer")
+}
+
+#[test]
+fn bdpt_renders_are_the_same_at_any_thread_count() {
+    let dir = Scratch::new("bdpt", "threads");
+    let mut images = Vec::new();
+    for (integrator, threads) in [("bdpt", "1"), ("bdpt", "3"), ("light", "1"), ("light", "2")] {
+        let exr = format!("{integrator}-{threads}.exr");
+        let out = pathtracer(&dir, &["--integrator", integrator, "-m", "4", "-s", "8", "-r", "40", "30", "-t", threads, "-f", "x.png", "--exr", &exr]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        images.push(std::fs::read(dir.join(&exr)).unwrap());
+    }
+    assert!(images[0] == images[1], "bdpt: -t 1 and -t 3 differ");
+    assert!(images[2] == images[3], "light: -t 1 and -t 2 differ");
+    assert!(images[0] != images[2]);
+}
+
+#[test]
+fn what_bdpt_does_not_support_is_refused_by_name() {
+    let dir = Scratch::new("bdpt", "refusals");
+    for (args, says) in [
+        (vec!["--integrator", "bdpt", "-a", "64", "0.05"], "-a"),
+        (vec!["--integrator", "light", "--part", "0/2", "--partial", "p.ptp"], "--part"),
+        (vec!["--integrator", "bdpt", "--split", "tiles", "--part", "0/2", "--partial", "p.ptp"], "--split tiles"),
+        (vec!["--integrator", "bdpt", "-l", "4"], "-l"),
+        (vec!["--integrator", "path", "--bdpt-strategy", "1,2"], "--bdpt-strategy"),
+        (vec!["--integrator", "bdpt", "--bdpt-strategy", "1,1"], "--bdpt-strategy 1,1"),
+    ] {
+        let mut a = args.clone();
+        a.extend(["-r", "8", "6", "-s", "1"]);
+        let out = pathtracer(&dir, &a);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(says) && err.trim().lines().count() == 1, "{args:?}: {err}");
+    }
+    assert!(!dir.join("p.ptp").exists() && !dir.join("x.png").exists());
+    // A light at infinity: the sky of an OBJ file.
+    let obj = dir.join("tri.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let out = pathtracer(&dir, &["--integrator", "bdpt", "tri.obj", "-r", "8", "6"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("light at infinity"), "{err}");
+}
