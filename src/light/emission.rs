@@ -94,6 +94,27 @@ impl Light {
         }
     }
 
+    /// The area density (at `q`, normal `n`, on primitive `prim`) with
+    /// which a light sample from `p` (`Light::sample`: by solid angle where
+    /// it can) picks `q`; for a point light its position density, 1.
+    pub fn sample_pdf_area(&self, scene: &Scene, p: Vec3, q: Vec3, n: Vec3, prim: u32) -> f32 {
+        let d = q - p;
+        let d2 = d.length_squared();
+        if !(d2 > 0.0) {
+            return 0.0;
+        }
+        let to_area = |pdf_w: f32| pdf_w * n.dot(d).abs() / (d2 * d2.sqrt());
+        match self {
+            Light::Point { .. } => 1.0,
+            Light::Rect { ex, ey, solid_angle, .. } => match solid_angle.and_then(|r| r.from(p)) {
+                Some(sr) => to_area(1.0 / sr.omega),
+                None => 1.0 / ex.cross(*ey).length(),
+            },
+            Light::Mesh { .. } | Light::Sphere { .. } => to_area(self.pdf_hit(scene, p, q, n, prim)),
+            _ => 0.0,
+        }
+    }
+
     /// The unit normal of this light's emitting side at `q`, a point a light
     /// sample (`Light::sample`, on primitive `prim`) chose; zero for a point light.
     pub fn normal_at(&self, scene: &Scene, q: Vec3, prim: u32) -> Vec3 {

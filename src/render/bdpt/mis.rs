@@ -24,12 +24,17 @@
 //! as in pbrt-v4 after its issue 347, with the factor on the side the count
 //! belongs to.
 //!
-//! The density of a next-event connection's light point (s = 1) enters as
-//! the light's pick probability × its area density, although the point was
-//! drawn by solid angle (as pbrt-v4 does): the weights are still a function
-//! of the path alone, so they sum to 1 over the strategies and the estimate
-//! stays unbiased; they are only not exactly the heuristic for that technique.
-//! Russian roulette is left out of the densities for the same reason.
+//! The light point y0 has two densities: as the start of a light subpath
+//! (pick × area density, the strategies s ≥ 2) and as a next-event sample
+//! from y1 (pick × the solid-angle sampling's density converted to area,
+//! s = 1). The ratio chain carries the first; the s = 1 terms (and, when s =
+//! 1 is the strategy used, every other term) are corrected by the ratio of
+//! the two. pbrt-v4 uses the area density for both, which keeps the weights
+//! summing to 1 but weighs next-event samples near a light, where solid-angle
+//! sampling is far better than area sampling, as if they were area samples.
+//! Russian roulette is left out of the densities: the weights are still a
+//! function of the path alone, so they sum to 1 and the estimate stays
+//! unbiased.
 
 use super::vertex::{Kind, Vertex};
 use super::Bdpt;
@@ -107,6 +112,26 @@ impl Bdpt<'_> {
                 lig[s - 2].rev = y.pdf(lights, camera_model, Some(&zt), &light[s - 2]);
             }
         }
+        // a_nee / a_emit for y0 of this path: the next-event density of y0
+        // from y1 over its density as a light subpath's start.
+        let nee_ratio = {
+            let (y0, y1) = match (s, t) {
+                (0, _) => (zt, camera[t - 2]),
+                (1, _) => (*ys.as_ref().expect("s = 1"), zt),
+                _ => (light[0], light[1]),
+            };
+            match y0.light(lights) {
+                Some(k) => {
+                    let emit = lights.lights[k].emission_pdf_pos();
+                    let nee = lights.lights[k].sample_pdf_area(self.scene, y1.p(), y0.p(), y0.it.ng, y0.it.prim_id);
+                    if emit > 0.0 && nee > 0.0 && (nee / emit).is_finite() { (nee / emit) as f64 } else { 1.0 }
+                }
+                None => 1.0,
+            }
+        };
+        // Every ratio below is relative to this strategy's density: with
+        // s = 1 that density has a_nee where the chain has a_emit.
+        let all = if s == 1 { 1.0 / nee_ratio } else { 1.0 };
         let share = self.light_tracing_share;
         let mut sum = 0.0f64;
         // Strategies with fewer camera vertices: (s + t − i, i).
@@ -114,7 +139,9 @@ impl Bdpt<'_> {
         for i in (1..t).rev() {
             r *= remap0(cam[i].rev) as f64 / remap0(cam[i].fwd) as f64;
             if !cam[i].delta && !cam[i - 1].delta {
-                let term = if i == 1 { r * share } else { r };
+                // (s + t − i, i): s' = 1 when i = t − 1 and s = 0.
+                let nee = if s == 0 && i == t - 1 { nee_ratio } else { 1.0 };
+                let term = r * all * nee * if i == 1 { share } else { 1.0 };
                 sum += term * term;
             }
         }
@@ -131,7 +158,9 @@ impl Bdpt<'_> {
                 !matches!(y0.kind, Kind::Light(k) if lights.lights[k].is_hittable())
             };
             if !lig[i].delta && !before_is_delta {
-                let term = r * count;
+                // (i, s + t − i): s' = 1 when i = 1.
+                let nee = if i == 1 { nee_ratio } else { 1.0 };
+                let term = r * count * all * nee;
                 sum += term * term;
             }
         }
