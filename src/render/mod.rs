@@ -8,7 +8,6 @@ pub mod normals;
 pub mod path;
 pub mod splat;
 pub mod sums;
-mod wavefront;
 
 use crate::accel::{Hit, Traversal};
 use crate::camera::Camera;

@@ -22,6 +22,16 @@
 //! vertices skip it, and the emitter (or environment) their sampled ray
 //! finds is counted with weight 1, in either mode. With `-m 1` a mirror
 //! therefore shows the light it reflects (CS184 renders it black there).
+//!
+//! The pieces, one a file: `direct` (a vertex's direct light, drawn as
+//! terms and replayed), `continuation` (the BSDF sample that continues the
+//! path, guided at diffuse vertices, and Russian roulette), `wavefront`
+//! (the same loop over a batch of paths, bounce by bounce); this file holds
+//! the vertex, the MIS weights of BSDF samples and the path-at-a-time loop.
+
+mod continuation;
+mod direct;
+mod wavefront;
 
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
