@@ -42,61 +42,86 @@ pub struct LensSample {
     pub weight: f32,
 }
 
-impl Camera {
+/// The camera's constants for importance queries, computed once
+/// (`Sensor::of`): a light tracer asks for them several times per light
+/// vertex, and a matrix inverse and two tangents per query were 5 % of a
+/// BDPT render.
+#[derive(Clone, Copy, Debug)]
+pub struct Sensor {
+    pos: Vec3,
+    c2w: glam::Mat3,
+    w2c: glam::Mat3,
+    axis: Vec3,
+    tan_x: f32,
+    tan_y: f32,
+    film_area: f32,
+    lens_radius: f32,
+    /// The plane in focus: z = −`focus` (1 for a pinhole).
+    focus: f32,
+    near: f32,
+    far: f32,
+}
+
+impl Sensor {
+    pub fn of(cam: &Camera) -> Sensor {
+        let tan_x = (cam.hfov_deg.to_radians() / 2.0).tan();
+        let tan_y = (cam.vfov_deg.to_radians() / 2.0).tan();
+        Sensor {
+            pos: cam.pos,
+            c2w: cam.c2w,
+            w2c: cam.c2w.inverse(),
+            axis: (cam.c2w * Vec3::NEG_Z).normalize(),
+            tan_x,
+            tan_y,
+            film_area: 4.0 * tan_x * tan_y,
+            lens_radius: if cam.has_lens() { cam.lens_radius } else { 0.0 },
+            focus: if cam.has_lens() { cam.focal_distance } else { 1.0 },
+            near: cam.near,
+            far: cam.far,
+        }
+    }
+
     /// The unit view axis (camera −z) in world space.
     pub fn view_axis(&self) -> Vec3 {
-        (self.c2w * Vec3::NEG_Z).normalize()
+        self.axis
     }
 
     /// A: the area of the film on the plane z = −1.
     pub fn film_area(&self) -> f32 {
-        4.0 * (self.hfov_deg.to_radians() / 2.0).tan() * (self.vfov_deg.to_radians() / 2.0).tan()
-    }
-
-    /// L: the lens's area (1 for a pinhole).
-    pub fn lens_area(&self) -> f32 {
-        if self.has_lens() {
-            PI * self.lens_radius * self.lens_radius
-        } else {
-            1.0
-        }
+        self.film_area
     }
 
     /// Where the ray leaving lens point `origin` along `dir` (world space)
     /// lands on the film: normalised image coordinates in `[0, 1)²`, or
     /// `None` outside the film or behind the camera.
     pub fn film_point(&self, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> {
-        let to_cam = self.c2w.inverse();
-        let o = to_cam * (origin - self.pos);
-        let d = to_cam * dir;
+        let o = self.w2c * (origin - self.pos);
+        let d = self.w2c * dir;
         if !(d.z < 0.0) {
             return None;
         }
-        let fd = if self.has_lens() { self.focal_distance } else { 1.0 };
-        // The plane in focus, z = −fd, then through the lens centre to z = −1.
-        let t = (-fd - o.z) / d.z;
-        let f = (o + d * t) / fd;
-        let tan_x = (self.hfov_deg.to_radians() / 2.0).tan();
-        let tan_y = (self.vfov_deg.to_radians() / 2.0).tan();
-        let (x, y) = ((f.x / tan_x + 1.0) * 0.5, (f.y / tan_y + 1.0) * 0.5);
+        // The plane in focus, z = −focus, then through the lens centre to z = −1.
+        let t = (-self.focus - o.z) / d.z;
+        let f = (o + d * t) / self.focus;
+        let (x, y) = ((f.x / self.tan_x + 1.0) * 0.5, (f.y / self.tan_y + 1.0) * 0.5);
         ((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y)).then_some((x, y))
     }
 
     /// pdf_dir: the solid-angle density of camera rays along `dir` (unit,
     /// world) from lens point `origin`; 0 where such rays do not reach the film.
     pub fn pdf_dir(&self, origin: Vec3, dir: Vec3) -> f32 {
-        let cos = dir.dot(self.view_axis());
+        let cos = dir.dot(self.axis);
         if !(cos > 0.0) || self.film_point(origin, dir).is_none() {
             return 0.0;
         }
-        1.0 / (self.film_area() * cos * cos * cos)
+        1.0 / (self.film_area * cos * cos * cos)
     }
 
     /// A lens point toward scene point `p` (`u` picks it on the lens, as
     /// camera rays do): `None` where the camera cannot see `p` (off the film,
     /// behind the camera, outside the clip range).
     pub fn sample_toward(&self, p: Vec3, u: (f32, f32)) -> Option<LensSample> {
-        let lens = if self.has_lens() {
+        let lens = if self.lens_radius > 0.0 {
             let r = self.lens_radius * u.0.sqrt();
             let phi = 2.0 * PI * u.1;
             self.pos + self.c2w * Vec3::new(r * phi.cos(), r * phi.sin(), 0.0)
@@ -109,13 +134,49 @@ impl Camera {
             return None;
         }
         let wi = d / dist;
-        let cos = (-wi).dot(self.view_axis());
+        let cos = (-wi).dot(self.axis);
         if !(cos > 0.0) {
             return None;
         }
         let film = self.film_point(lens, -wi)?;
-        let weight = 1.0 / (self.film_area() * cos * cos * cos * dist * dist);
+        let weight = 1.0 / (self.film_area * cos * cos * cos * dist * dist);
         weight.is_finite().then_some(LensSample { lens, wi, dist, film, weight })
+    }
+}
+
+impl Camera {
+    /// The unit view axis (camera −z) in world space.
+    pub fn view_axis(&self) -> Vec3 {
+        Sensor::of(self).view_axis()
+    }
+
+    /// A: the area of the film on the plane z = −1.
+    pub fn film_area(&self) -> f32 {
+        Sensor::of(self).film_area()
+    }
+
+    /// L: the lens's area (1 for a pinhole).
+    pub fn lens_area(&self) -> f32 {
+        if self.has_lens() {
+            PI * self.lens_radius * self.lens_radius
+        } else {
+            1.0
+        }
+    }
+
+    /// `Sensor::film_point`.
+    pub fn film_point(&self, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> {
+        Sensor::of(self).film_point(origin, dir)
+    }
+
+    /// `Sensor::pdf_dir`.
+    pub fn pdf_dir(&self, origin: Vec3, dir: Vec3) -> f32 {
+        Sensor::of(self).pdf_dir(origin, dir)
+    }
+
+    /// `Sensor::sample_toward`.
+    pub fn sample_toward(&self, p: Vec3, u: (f32, f32)) -> Option<LensSample> {
+        Sensor::of(self).sample_toward(p, u)
     }
 }
 

@@ -66,7 +66,24 @@ impl Bdpt<'_> {
     /// The weight of strategy (s, t) for the path `light[..s]` + `camera[..t]`,
     /// with `sampled` standing for `light[0]` (s = 1: the next-event light
     /// point) or `camera[0]` (t = 1: the lens point chosen toward the scene).
-    pub(super) fn mis_weight(&self, light: &[Vertex], camera: &[Vertex], sampled: Option<&Vertex>, s: usize, t: usize) -> f32 {
+    /// a_nee / a_emit of light point `y0` connected to `y1` (see the module
+    /// comment); 1 where `y0` is not on a light.
+    pub(super) fn nee_ratio(&self, y0: &Vertex, y1: &Vertex) -> f64 {
+        let Some(k) = y0.light(self.lights) else { return 1.0 };
+        let l = &self.lights.lights[k];
+        let emit = l.emission_pdf_pos();
+        let nee = l.sample_pdf_area(self.scene, y1.p(), y0.p(), y0.it.ng, y0.it.prim_id);
+        if emit > 0.0 && nee > 0.0 && (nee / emit).is_finite() {
+            (nee / emit) as f64
+        } else {
+            1.0
+        }
+    }
+
+    /// `light_nee_ratio`: `nee_ratio(light[0], light[1])`, the same for every
+    /// strategy with s ≥ 2, so computed once per light subpath.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn mis_weight(&self, light: &[Vertex], camera: &[Vertex], sampled: Option<&Vertex>, s: usize, t: usize, light_nee_ratio: f64) -> f32 {
         if s + t == 2 {
             return 1.0;
         }
@@ -92,7 +109,7 @@ impl Bdpt<'_> {
         if s > 0 {
             lig[s - 1].delta = false;
         }
-        let (lights, camera_model) = (self.lights, self.camera);
+        let (lights, camera_model) = (self.lights, &self.camera);
         // z(t-1) made from the light side.
         cam[t - 1].rev = match &ys {
             Some(y) => y.pdf(lights, camera_model, (s > 1).then(|| &light[s - 2]), &zt),
@@ -114,20 +131,10 @@ impl Bdpt<'_> {
         }
         // a_nee / a_emit for y0 of this path: the next-event density of y0
         // from y1 over its density as a light subpath's start.
-        let nee_ratio = {
-            let (y0, y1) = match (s, t) {
-                (0, _) => (zt, camera[t - 2]),
-                (1, _) => (*ys.as_ref().expect("s = 1"), zt),
-                _ => (light[0], light[1]),
-            };
-            match y0.light(lights) {
-                Some(k) => {
-                    let emit = lights.lights[k].emission_pdf_pos();
-                    let nee = lights.lights[k].sample_pdf_area(self.scene, y1.p(), y0.p(), y0.it.ng, y0.it.prim_id);
-                    if emit > 0.0 && nee > 0.0 && (nee / emit).is_finite() { (nee / emit) as f64 } else { 1.0 }
-                }
-                None => 1.0,
-            }
+        let nee_ratio = match s {
+            0 => self.nee_ratio(&zt, &camera[t - 2]),
+            1 => self.nee_ratio(ys.as_ref().expect("s = 1"), &zt),
+            _ => light_nee_ratio,
         };
         // Every ratio below is relative to this strategy's density: with
         // s = 1 that density has a_nee where the chain has a_emit.

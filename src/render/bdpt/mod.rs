@@ -43,6 +43,7 @@ mod vertex;
 use super::splat::Splat;
 use super::{Integrator, Region};
 use crate::accel::{Hit, Traversal};
+use crate::camera::importance::Sensor;
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::light::emission::LightPower;
@@ -70,7 +71,7 @@ pub struct Bdpt<'a> {
     scene: &'a Scene,
     accel: &'a dyn Traversal,
     lights: &'a Lights,
-    camera: &'a Camera,
+    camera: Sensor,
     max_depth: u32,
     accumulate: bool,
     technique: Technique,
@@ -108,7 +109,7 @@ impl<'a> Bdpt<'a> {
         }
         let power = LightPower::new(&lights.lights);
         let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
-        Ok(Bdpt { scene, accel, lights, camera, max_depth, accumulate, technique, power, width, height, light_tracing_share })
+        Ok(Bdpt { scene, accel, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share })
     }
 
     /// Whether strategy (s, t) is summed.
@@ -157,6 +158,7 @@ impl Integrator for Bdpt<'_> {
         let mut light: Vec<Vertex> = Vec::with_capacity(m + 1);
         self.camera_subpath(ray, hit, sampler, &mut camera, camera_vertices, rays);
         self.light_subpath(sampler, &mut light, m + 1, rays);
+        let light_nee_ratio = if light.len() >= 2 && self.weighted() { self.nee_ratio(&light[0], &light[1]) } else { 1.0 };
         let mut l = Vec3::ZERO;
         for t in 1..=camera.len() {
             for s in 0..=light.len() {
@@ -164,7 +166,7 @@ impl Integrator for Bdpt<'_> {
                     continue;
                 }
                 let Some(c) = self.connect(&light, &camera, s, t, sampler, rays) else { continue };
-                let w = if self.weighted() { self.mis_weight(&light, &camera, c.sampled.as_ref(), s, t) } else { 1.0 };
+                let w = if self.weighted() { self.mis_weight(&light, &camera, c.sampled.as_ref(), s, t, light_nee_ratio) } else { 1.0 };
                 let value = c.value * w;
                 match c.film {
                     Some((x, y)) => splats.push(Splat {

@@ -171,7 +171,7 @@ impl Vertex {
 
     /// The area density with which this vertex, having been reached from
     /// `prev` (ignored by the camera and lights), generates `next`.
-    pub fn pdf(&self, lights: &Lights, camera: &crate::camera::Camera, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+    pub fn pdf(&self, lights: &Lights, camera: &crate::camera::importance::Sensor, prev: Option<&Vertex>, next: &Vertex) -> f32 {
         let w = (next.p() - self.p()).normalize_or_zero();
         let pdf_dir = match self.kind {
             Kind::Camera => camera.pdf_dir(self.p(), w),
