@@ -25,7 +25,7 @@ use super::Camera;
 use glam::Vec3;
 use std::f32::consts::PI;
 
-/// A lens point chosen toward a point of the scene (`Camera::sample_toward`).
+/// A lens point chosen toward a point of the scene (`Sensor::sample_toward`).
 #[derive(Clone, Copy, Debug)]
 pub struct LensSample {
     /// The lens point, in world space.
@@ -144,42 +144,6 @@ impl Sensor {
     }
 }
 
-impl Camera {
-    /// The unit view axis (camera −z) in world space.
-    pub fn view_axis(&self) -> Vec3 {
-        Sensor::of(self).view_axis()
-    }
-
-    /// A: the area of the film on the plane z = −1.
-    pub fn film_area(&self) -> f32 {
-        Sensor::of(self).film_area()
-    }
-
-    /// L: the lens's area (1 for a pinhole).
-    pub fn lens_area(&self) -> f32 {
-        if self.has_lens() {
-            PI * self.lens_radius * self.lens_radius
-        } else {
-            1.0
-        }
-    }
-
-    /// `Sensor::film_point`.
-    pub fn film_point(&self, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> {
-        Sensor::of(self).film_point(origin, dir)
-    }
-
-    /// `Sensor::pdf_dir`.
-    pub fn pdf_dir(&self, origin: Vec3, dir: Vec3) -> f32 {
-        Sensor::of(self).pdf_dir(origin, dir)
-    }
-
-    /// `Sensor::sample_toward`.
-    pub fn sample_toward(&self, p: Vec3, u: (f32, f32)) -> Option<LensSample> {
-        Sensor::of(self).sample_toward(p, u)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -202,11 +166,11 @@ mod tests {
             for (x, y) in [(0.5, 0.5), (0.03, 0.9), (0.97, 0.11)] {
                 for u in [(0.0, 0.0), (0.7, 0.2), (0.3, 0.9)] {
                     let r = if lens { cam.generate_ray_thin_lens(x, y, u) } else { cam.generate_ray(x, y) };
-                    let (fx, fy) = cam.film_point(r.origin, r.dir).expect("on the film");
+                    let (fx, fy) = Sensor::of(&cam).film_point(r.origin, r.dir).expect("on the film");
                     assert!((fx - x).abs() < 1e-4 && (fy - y).abs() < 1e-4, "lens {lens}: ({x}, {y}) -> ({fx}, {fy})");
                     // And the lens point chosen toward a point on that ray
                     // with the same draw is the ray's origin.
-                    let s = cam.sample_toward(r.at(3.0), u).expect("visible");
+                    let s = Sensor::of(&cam).sample_toward(r.at(3.0), u).expect("visible");
                     assert!((s.lens - r.origin).length() < 1e-5 && (s.film.0 - x).abs() < 1e-4 && (s.film.1 - y).abs() < 1e-4);
                 }
             }
@@ -219,7 +183,8 @@ mod tests {
         // over uniform directions in the cone around the axis, with the
         // standard error from the samples (fixed seed, 5 sigma).
         let cam = camera(false);
-        let axis = cam.view_axis();
+        let sensor = Sensor::of(&cam);
+        let axis = sensor.view_axis();
         let frame = crate::sampling::Frame::new(axis);
         let cos_max = 0.8f32; // wider than the 49°x38° field of view
         let mut rng = crate::rng::Rng::new(7, 1);
@@ -230,7 +195,7 @@ mod tests {
             let z = 1.0 - u1 * (1.0 - cos_max);
             let r = (1.0 - z * z).max(0.0).sqrt();
             let d = frame.to_world(Vec3::new(r * (2.0 * PI * u2).cos(), r * (2.0 * PI * u2).sin(), z));
-            let v = (cam.pdf_dir(cam.pos, d) * 2.0 * PI * (1.0 - cos_max)) as f64;
+            let v = (sensor.pdf_dir(cam.pos, d) * 2.0 * PI * (1.0 - cos_max)) as f64;
             s1 += v;
             s2 += v * v;
         }

@@ -59,6 +59,15 @@ impl Light {
         matches!(self, Light::Mesh { .. } | Light::Sphere { .. })
     }
 
+    /// The scene geometry this light is (an emissive mesh's id), or
+    /// `u32::MAX` for lights that are not a mesh.
+    pub fn geometry(&self) -> u32 {
+        match self {
+            Light::Mesh { geom_id, .. } => *geom_id,
+            _ => u32::MAX,
+        }
+    }
+
     /// Emitted power (luminance-weighted), up to the common factor π for
     /// area lights: what the light choice is proportional to.
     pub fn power(&self) -> f32 {

@@ -272,21 +272,20 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         hits.clear();
         hits.resize(batch.len(), None);
         *rays += batch.len() as u64;
-        if splatting {
-            if s.batch_rays {
-                accel.intersect_coherent(&batch, &mut hits);
-            } else {
-                for (r, h) in batch.iter().zip(hits.iter_mut()) {
-                    *h = accel.intersect(r);
-                }
+        if s.batch_rays {
+            accel.intersect_coherent(&batch, &mut hits);
+        } else {
+            for (r, h) in batch.iter().zip(hits.iter_mut()) {
+                *h = accel.intersect(r);
             }
+        }
+        if splatting {
             for (k, &i) in active.iter().enumerate() {
                 let p = &mut px[i];
                 let l = integ.radiance_splat(&batch[k], hits[k], &mut p.sampler, rays, splats);
                 p.add(l, rule);
             }
         } else if s.batch_rays {
-            accel.intersect_coherent(&batch, &mut hits);
             // `active` lists exactly the unfinished pixels, in order.
             let mut samplers: Vec<&mut Sampler> = px.iter_mut().filter(|p| !p.done).map(|p| &mut p.sampler).collect();
             debug_assert_eq!(samplers.len(), active.len());
@@ -297,9 +296,6 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
                 px[i].add(radiance[k], rule);
             }
         } else {
-            for (r, h) in batch.iter().zip(hits.iter_mut()) {
-                *h = accel.intersect(r);
-            }
             for (k, &i) in active.iter().enumerate() {
                 let p = &mut px[i];
                 let l = integ.radiance_from(&batch[k], hits[k], &mut p.sampler, rays);

@@ -22,7 +22,7 @@
 //! those that splat elsewhere): slightly low where one light subpath splats
 //! into one pixel twice (two strategies through the same lens point).
 
-use super::sums::{Fixed, SAMPLE_LIMIT};
+use super::sums::{add_channels, Fixed};
 use glam::Vec3;
 
 /// Light landing on frame pixel (x, y) (CS184's frame coordinates, y up).
@@ -45,21 +45,7 @@ impl SplatSums {
     /// counted as 0, a magnitude above `SAMPLE_LIMIT` as the limit), as
     /// `PixelSums::add` does.
     pub fn add(&mut self, l: Vec3) -> bool {
-        let mut changed = false;
-        for c in 0..3 {
-            let mut x = l[c];
-            if !(x.abs() <= SAMPLE_LIMIT) {
-                changed = true;
-                x = if x.is_nan() { 0.0 } else { SAMPLE_LIMIT.copysign(x) };
-            }
-            if x == 0.0 {
-                continue;
-            }
-            let x = x as f64;
-            self.sum[c] = self.sum[c].add(Fixed::from_f64(x));
-            self.sum_sq[c] = self.sum_sq[c].add(Fixed::from_f64(x * x));
-        }
-        changed
+        add_channels(&mut self.sum, &mut self.sum_sq, l.to_array())
     }
 
     pub fn merge(&mut self, o: &SplatSums) {

@@ -90,6 +90,29 @@ impl Fixed {
     }
 }
 
+/// Add one value's channels to exact sums of values and squares. Returns
+/// whether it had to be changed to be accumulated: a NaN channel counts as
+/// 0 and a magnitude above `SAMPLE_LIMIT` as the limit (the caller reports
+/// how many). Pixel samples and splats alike.
+#[inline]
+pub fn add_channels(sum: &mut [Fixed; 3], sum_sq: &mut [Fixed; 3], l: [f32; 3]) -> bool {
+    let mut changed = false;
+    for c in 0..3 {
+        let mut x = l[c];
+        if !(x.abs() <= SAMPLE_LIMIT) {
+            changed = true;
+            x = if x.is_nan() { 0.0 } else { SAMPLE_LIMIT.copysign(x) };
+        }
+        if x == 0.0 {
+            continue; // adds nothing (black samples are common: escaped rays, shadow)
+        }
+        let x = x as f64;
+        sum[c] = sum[c].add(Fixed::from_f64(x));
+        sum_sq[c] = sum_sq[c].add(Fixed::from_f64(x * x));
+    }
+    changed
+}
+
 /// One pixel's samples: how many, and exact sums of radiance and its square.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PixelSums {
@@ -104,22 +127,8 @@ impl PixelSums {
     /// `SAMPLE_LIMIT` as the limit (the caller reports how many).
     #[inline]
     pub fn add(&mut self, l: [f32; 3]) -> bool {
-        let mut changed = false;
         self.n += 1;
-        for c in 0..3 {
-            let mut x = l[c];
-            if !(x.abs() <= SAMPLE_LIMIT) {
-                changed = true;
-                x = if x.is_nan() { 0.0 } else { SAMPLE_LIMIT.copysign(x) };
-            }
-            if x == 0.0 {
-                continue; // adds nothing (black samples are common: escaped rays, shadow)
-            }
-            let x = x as f64;
-            self.sum[c] = self.sum[c].add(Fixed::from_f64(x));
-            self.sum_sq[c] = self.sum_sq[c].add(Fixed::from_f64(x * x));
-        }
-        changed
+        add_channels(&mut self.sum, &mut self.sum_sq, l)
     }
 
     /// The samples of both: exact, so the order of merging never matters.

@@ -87,12 +87,8 @@ impl Bdpt<'_> {
             if self.accel.occluded(&z.it.spawn_ray_to(target)) {
                 return None;
             }
-            let geom = match l {
-                crate::light::Light::Mesh { geom_id, .. } => *geom_id,
-                _ => u32::MAX,
-            };
             let origin_pdf = pmf * l.emission_pdf_pos();
-            let y0 = Vertex::at_point(Kind::Light(k), target, n, target.abs().max_element(), geom, ls.prim, ls.value / (ls.pdf * pmf), origin_pdf);
+            let y0 = Vertex::at_point(Kind::Light(k), target, n, target.abs().max_element(), l.geometry(), ls.prim, ls.value / (ls.pdf * pmf), origin_pdf);
             return done(value, Some(y0), None);
         }
         let y = &light[s - 1];

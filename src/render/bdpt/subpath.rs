@@ -58,11 +58,7 @@ impl Bdpt<'_> {
         let light = &self.lights.lights[k];
         let Some(e) = light.sample_emission(self.scene, sampler.get_1d(dim::light_vertex(0, dim::EMIT_SELECT)), draw2(dim::EMIT_POINT), draw2(dim::EMIT_DIRECTION)) else { return };
         let origin_pdf = pmf * e.pdf_pos;
-        let geom = match light {
-            crate::light::Light::Mesh { geom_id, .. } => *geom_id,
-            _ => u32::MAX,
-        };
-        let y0 = Vertex::at_point(Kind::Light(k), e.p, e.n, e.magnitude, geom, e.prim, e.le / origin_pdf, origin_pdf);
+        let y0 = Vertex::at_point(Kind::Light(k), e.p, e.n, e.magnitude, light.geometry(), e.prim, e.le / origin_pdf, origin_pdf);
         path.push(y0);
         if max < 2 {
             return;
