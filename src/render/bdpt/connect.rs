@@ -5,7 +5,7 @@
 //! * s = 0: the camera subpath ends on an emitter: its radiance toward
 //!   z(t−2), times the camera throughput;
 //! * t = 1 (light tracing): a lens point chosen toward y(s−1)
-//!   (`Camera::sample_toward`); the contribution lands where that ray meets
+//!   (`Sensor::sample_toward`); the contribution lands where that ray meets
 //!   the film, usually another pixel (a splat);
 //! * s = 1 (next-event estimation): a light picked by power and a point on
 //!   it drawn as the path tracer draws light samples (`Light::sample`: by
