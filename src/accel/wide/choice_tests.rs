@@ -73,8 +73,8 @@ fn both_any_hit_orders_answer_alike_and_the_choice_follows_the_work() {
             #[target_feature(enable = "avx2")]
             unsafe fn packets(bvh: &WideBvh<8>, rays: &[Ray], order: ChildOrder) -> Vec<bool> {
                 let mut out = vec![false; rays.len()];
-                let mut unused = [None; frustum::PACKET];
-                for (r, o) in rays.chunks(frustum::PACKET).zip(out.chunks_mut(frustum::PACKET)) {
+                let mut unused = [None; packet::PACKET];
+                for (r, o) in rays.chunks(packet::PACKET).zip(out.chunks_mut(packet::PACKET)) {
                     let soa = super::packet::RaysSoA::new(r);
                     match frustum::Frustum::of(&soa, true) {
                         Some(f) => bvh.frustum_packet::<true, false>(&f, &soa, r, &mut unused, o, order),

@@ -28,7 +28,7 @@
 //! ray mask per node (`masked`).
 
 use super::occluders::OccluderCache;
-use super::packet::RaysSoA;
+use super::packet::{RaysSoA, PACKET};
 use super::{Shear, WideBvh, EMPTY, LEAF_BIT, STACK};
 use crate::accel::bvh::ROBUST_SCALE;
 use crate::accel::prims::closer;
@@ -53,8 +53,6 @@ pub(super) const WASTED_LEAF_TESTS: u32 = 32;
 #[cfg(test)]
 pub(super) static BAILOUTS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
-/// Rays per packet.
-pub(super) const PACKET: usize = 16;
 /// Shadow packets whose unit directions differ by more than this in some
 /// component go to `masked` traversal: the interval ray of a fanned-out
 /// packet (shadow rays near their light) enters many boxes none of its rays

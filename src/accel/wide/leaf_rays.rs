@@ -7,9 +7,8 @@
 //! and the occlusion of whichever rays entered a leaf (`leaf_occluded`), for
 //! the frustum, swept, masked and stream traversals.
 
-use super::frustum::PACKET;
-use super::kernels::{intersect_group, intersect_group_x2, intersect_group_x4, LaneHit};
-use super::packet::RaysSoA;
+use super::triangle::{intersect_group, intersect_group_x2, intersect_group_x4, LaneHit};
+use super::packet::{RaysSoA, PACKET};
 use super::{Shear, WideBvh, EMPTY, LANES};
 use crate::accel::prims::closer;
 use crate::accel::Hit;

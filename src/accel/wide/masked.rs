@@ -22,9 +22,9 @@
 //! its own slab test enters (the same operations lane by lane) and tests
 //! the same triangles, so it is occluded exactly when it is alone.
 
-use super::frustum::PACKET;
-use super::kernels::{Shear, Slab};
-use super::packet::RaysSoA;
+use super::kernels::Slab;
+use super::triangle::Shear;
+use super::packet::{RaysSoA, PACKET};
 use super::{WideBvh, EMPTY, LEAF_BIT, STACK};
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
@@ -89,7 +89,7 @@ impl<const W: usize> WideBvh<W> {
             while todo != 0 {
                 let i = todo.trailing_zeros() as usize;
                 todo &= todo - 1;
-                let (t0, t1) = slabs[i].assume_init_ref().entry_exit_avx(node, tmin[i], tmax[i]);
+                let (t0, t1) = slabs[i].assume_init_ref().entry_exit::<__m256, W>(node, 0, tmin[i], tmax[i]);
                 let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
                 masks = _mm256_or_si256(masks, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << i)));
                 near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));

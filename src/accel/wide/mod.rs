@@ -11,6 +11,12 @@
 //! expected to miss the caches (`cost`) with 4 rays interleaved
 //! (`interleave`).
 //!
+//! The kernels are written once over the lane width (`lanes`: 4, 8 or 16
+//! f32 lanes behind one trait): the slab test of a node's boxes
+//! (`kernels`) and the watertight triangle test (`triangle`). The packet
+//! traversals share their ray set-up and packet size from `packet`, which
+//! imports none of them.
+//!
 //! Every lane performs exactly the scalar operations of `intersect_triangle`
 //! and of a scalar slab test, in the same order, so answers are
 //! bit-identical to the scalar code (and so to the brute-force oracle)
@@ -22,6 +28,8 @@ mod frustum;
 mod interleave;
 mod leaf_rays;
 mod kernels;
+#[cfg(target_arch = "x86_64")]
+mod lanes;
 mod layout;
 mod masked;
 mod occluders;
@@ -29,10 +37,12 @@ mod sweep;
 mod packet;
 mod single;
 mod stream;
+mod triangle;
 
 use single::{pop_within, ChildOrder};
 
-use kernels::{intersect_group, LaneHit, Shear, Slab};
+use kernels::Slab;
+use triangle::{intersect_group, LaneHit, Shear};
 use stream::STREAM_MIN_BYTES;
 use layout::Arrays;
 

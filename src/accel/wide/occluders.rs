@@ -27,8 +27,7 @@
 //! all went by swept boxes are traced with fewer rays; whole packets only
 //! skipped at first, arch gained half as much (83-88) and cow lost 5 %.
 
-use super::frustum::PACKET;
-use super::packet::{RaysSoA, NO_OCCLUDER};
+use super::packet::{RaysSoA, NO_OCCLUDER, PACKET};
 use super::{WideBvh, LANES};
 
 #[derive(Default)]

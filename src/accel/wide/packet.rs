@@ -22,13 +22,16 @@
 //! spread (a heuristic that picks a traversal, not an answer) uses a
 //! different normalisation.
 
-use super::frustum::PACKET;
-use super::kernels::{scalar_lane, Shear, Slab};
+use super::kernels::Slab;
+use super::triangle::{scalar_lane, watertight, Shear};
 use super::TriGroup;
 use crate::accel::bvh::ROBUST_SCALE;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use std::arch::x86_64::*;
+
+/// Rays per packet.
+pub(super) const PACKET: usize = 16;
 
 /// The packet's rays in SoA form, and what the traversals derive from them.
 /// Lanes past the packet's rays repeat its first ray, so reductions over
@@ -380,75 +383,27 @@ impl RaysSoA {
 
     /// Bit r set when ray `8·half + r` hits triangle `lane` of `g` in
     /// (tmin, `tmax[i]`], for rays sharing the permutation `k`
-    /// (`shared_axes`): the watertight test of `intersect_triangle` with the
-    /// rays in the lanes and one triangle broadcast, where
-    /// `intersect_group_x2` puts two rays against four triangles. Each lane
-    /// does that kernel's operations in its order, and a lane with an exact
-    /// zero edge function is redone by `scalar_lane` as there, so every
-    /// bit is the single-ray test's answer. For occlusion, where the ray
-    /// constants are already here in SoA form: no per-ray set-up.
-    ///
-    /// The arithmetic repeats `intersect_group_x2`'s line for line: moving
-    /// it into one function both kernels call (returning its registers in
-    /// a struct) made the pair kernel's camera rays 38 % slower (CBbunny,
-    /// 1 thread: 53.5 → 33.2 Mrays/s), so each kernel keeps its own copy.
+    /// (`shared_axes`): the watertight test (`triangle::watertight`) with
+    /// the rays in the lanes and one triangle broadcast, where
+    /// `intersect_group_x2` puts two rays against four triangles; a lane
+    /// with an exact zero edge function is redone by `scalar_lane`, so
+    /// every bit is the single-ray test's answer. For occlusion, where the
+    /// ray constants are already here in SoA form: no per-ray set-up.
     ///
     /// # Safety
     /// The CPU must have AVX2.
     #[inline(always)]
     pub(super) unsafe fn hits_triangle(&self, g: &TriGroup, lane: usize, half: usize, k: [usize; 3], tmax: &[f32; PACKET]) -> u32 {
         let b = half * 8;
+        let rows = |row: &[f32; PACKET]| _mm256_loadu_ps(row.as_ptr().add(b));
         let [kx, ky, kz] = k;
-        let o = |a: usize| _mm256_loadu_ps(self.o[a].as_ptr().add(b));
-        let (ox, oy, oz) = (o(kx), o(ky), o(kz));
-        let (sx, sy, sz) = (_mm256_loadu_ps(self.s[0].as_ptr().add(b)), _mm256_loadu_ps(self.s[1].as_ptr().add(b)), _mm256_loadu_ps(self.s[2].as_ptr().add(b)));
         let v = |vert: usize, axis: usize| _mm256_set1_ps(g.v[vert][axis][lane]);
-        let axk = _mm256_sub_ps(v(0, kx), ox);
-        let ayk = _mm256_sub_ps(v(0, ky), oy);
-        let azk = _mm256_sub_ps(v(0, kz), oz);
-        let bxk = _mm256_sub_ps(v(1, kx), ox);
-        let byk = _mm256_sub_ps(v(1, ky), oy);
-        let bzk = _mm256_sub_ps(v(1, kz), oz);
-        let cxk = _mm256_sub_ps(v(2, kx), ox);
-        let cyk = _mm256_sub_ps(v(2, ky), oy);
-        let czk = _mm256_sub_ps(v(2, kz), oz);
-        let ax = _mm256_sub_ps(axk, _mm256_mul_ps(sx, azk));
-        let ay = _mm256_sub_ps(ayk, _mm256_mul_ps(sy, azk));
-        let bx = _mm256_sub_ps(bxk, _mm256_mul_ps(sx, bzk));
-        let by = _mm256_sub_ps(byk, _mm256_mul_ps(sy, bzk));
-        let cx = _mm256_sub_ps(cxk, _mm256_mul_ps(sx, czk));
-        let cy = _mm256_sub_ps(cyk, _mm256_mul_ps(sy, czk));
-        let e0 = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-        let e1 = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-        let e2 = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
-        let zero = _mm256_setzero_ps();
-        let eq = |a, b| _mm256_cmp_ps::<_CMP_EQ_OQ>(a, b);
-        let lt = |a, b| _mm256_cmp_ps::<_CMP_LT_OS>(a, b);
-        let gt = |a, b| _mm256_cmp_ps::<_CMP_GT_OS>(a, b);
-        let any_zero = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(eq(e0, zero), eq(e1, zero)), eq(e2, zero))) as u32;
-        let neg = _mm256_or_ps(_mm256_or_ps(lt(e0, zero), lt(e1, zero)), lt(e2, zero));
-        let pos = _mm256_or_ps(_mm256_or_ps(gt(e0, zero), gt(e1, zero)), gt(e2, zero));
-        let det = _mm256_add_ps(_mm256_add_ps(e0, e1), e2);
-        let abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
-        let finite = lt(_mm256_and_ps(det, abs_mask), _mm256_set1_ps(f32::INFINITY));
-        let mut ok = _mm256_andnot_ps(_mm256_and_ps(neg, pos), _mm256_and_ps(finite, _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero)));
-        let az = _mm256_mul_ps(sz, azk);
-        let bz = _mm256_mul_ps(sz, bzk);
-        let cz = _mm256_mul_ps(sz, czk);
-        let ts = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(e0, az), _mm256_mul_ps(e1, bz)), _mm256_mul_ps(e2, cz));
-        let behind = _mm256_or_ps(
-            _mm256_and_ps(gt(det, zero), _mm256_cmp_ps::<_CMP_LE_OS>(ts, zero)),
-            _mm256_and_ps(lt(det, zero), _mm256_cmp_ps::<_CMP_GE_OS>(ts, zero)),
-        );
-        ok = _mm256_andnot_ps(behind, ok);
-        let mut mask = _mm256_movemask_ps(ok) as u32 & !any_zero;
-        if mask != 0 {
-            let t = _mm256_mul_ps(ts, _mm256_div_ps(_mm256_set1_ps(1.0), det));
-            let tmin = _mm256_loadu_ps(self.tmin.as_ptr().add(b));
-            let tmax = _mm256_loadu_ps(tmax.as_ptr().add(b));
-            mask &= _mm256_movemask_ps(_mm256_and_ps(gt(t, tmin), _mm256_cmp_ps::<_CMP_LE_OS>(t, tmax))) as u32;
-        }
-        let mut z = any_zero & 0xff;
+        let p = [[v(0, kx), v(0, ky), v(0, kz)], [v(1, kx), v(1, ky), v(1, kz)], [v(2, kx), v(2, ky), v(2, kz)]];
+        let o = [rows(&self.o[kx]), rows(&self.o[ky]), rows(&self.o[kz])];
+        let s = [rows(&self.s[0]), rows(&self.s[1]), rows(&self.s[2])];
+        let tested = watertight::<__m256>(p, o, s, || (rows(&self.tmin), rows(tmax)));
+        let mut mask = tested.mask;
+        let mut z = tested.any_zero & 0xff;
         while z != 0 {
             let r = z.trailing_zeros() as usize;
             z &= z - 1;

@@ -3,7 +3,8 @@
 //! batches traced ray by ray, and the child order any-hit rays take,
 //! chosen per batch from a sample of its rays (`any_order`).
 
-use super::kernels::{sort_far_first, Shear, Slab};
+use super::kernels::{sort_far_first, Slab};
+use super::triangle::Shear;
 use super::{decayed_sum, CacheAligned, Node, WideBvh, EMPTY, LEAF_BIT, STACK};
 use crate::accel::prims::closer;
 use crate::accel::Hit;

@@ -6,7 +6,7 @@
 //! packets and ours.
 //!
 //! Every node is tested by each still-unoccluded ray that entered it, one
-//! ray against the node's 8 boxes per AVX2 instruction (`entry_exit_avx`,
+//! ray against the node's 8 boxes per AVX2 instruction (`entry_exit`,
 //! the single-ray test's operations), which gives each child the mask of
 //! the rays entering it. Against a ray at a time, a node shared by several
 //! rays is fetched once (and prefetched when pushed), and its rays' tests
@@ -19,7 +19,8 @@
 //! its own slab test enters and tests the same triangles with the
 //! watertight test, so it is occluded exactly when it is alone.
 
-use super::kernels::{slab_planes_avx, Shear, Slab};
+use super::kernels::{slab_planes, Slab};
+use super::triangle::Shear;
 use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT, STACK};
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
@@ -185,9 +186,9 @@ impl<const W: usize> WideBvh<W> {
                     let r = t.trailing_zeros() as usize;
                     t &= t - 1;
                     let i = 32 * half + r;
-                    // `Slab::entry_exit_avx`'s operations, with this
+                    // `Slab::entry_exit`'s operations, with this
                     // stream's planes.
-                    let (t0, t1) = slab_planes_avx(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.far[i]);
+                    let (t0, t1) = slab_planes::<__m256>(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.far[i]);
                     let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
                     *m = _mm256_or_si256(*m, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << r)));
                     near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));

@@ -56,8 +56,7 @@
 //! magnitude above those errors) on every side, and its rate of change
 //! kept at least that far from zero so its reciprocal is finite.
 
-use super::frustum::PACKET;
-use super::packet::RaysSoA;
+use super::packet::{RaysSoA, PACKET};
 use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT, STACK};
 use crate::geometry::RayTransform;
 use crate::ray::Ray;

@@ -1,7 +1,7 @@
 //! Unit tests of the wide BVH: every width, instruction set and traversal
 //! mode against brute force, and the SIMD kernels against the scalar code.
 
-use super::kernels::intersect_group_scalar;
+use super::triangle::intersect_group_scalar;
 use super::*;
 use glam::Vec3;
 use crate::accel::brute::BruteForce;
@@ -26,7 +26,7 @@ pub(super) fn tight_packets(n: usize, seed: u64) -> Vec<Ray> {
         let spread = if p % 4 == 3 { 0.2 } else { 1e-3 };
         let o = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 4.0 - 2.0;
         let d = (Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0).normalize_or(Vec3::X);
-        for _ in 0..frustum::PACKET {
+        for _ in 0..packet::PACKET {
             let jo = (Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5) * spread;
             let jd = (Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5) * spread;
             rays.push(Ray::new(o + jo, d + jd));
@@ -253,14 +253,14 @@ fn packet_box_test_equals_the_single_ray_test() {
     for node in bvh.nodes.iter().take(40) {
         let hi = Vec3::new(node.bounds[3][0], node.bounds[4][0], node.bounds[5][0]);
         let o = hi + Vec3::new(0.31, 0.27, 0.43);
-        packets.extend((0..frustum::PACKET).map(|i| Ray::new(o, hi - o + Vec3::splat(1e-4 * i as f32))));
+        packets.extend((0..packet::PACKET).map(|i| Ray::new(o, hi - o + Vec3::splat(1e-4 * i as f32))));
     }
     let mut cases = 0;
-    for p in packets.chunks(frustum::PACKET) {
+    for p in packets.chunks(packet::PACKET) {
         let Some(f) = frustum::Frustum::new(p, false) else { continue };
         // SAFETY: AVX2 checked above.
         let soa = unsafe { super::packet::RaysSoA::new(p) };
-        let mut tmax = [0.0f32; frustum::PACKET];
+        let mut tmax = [0.0f32; packet::PACKET];
         for (i, r) in p.iter().enumerate() {
             tmax[i] = if i % 3 == 0 { r.tmax } else { 0.5 + i as f32 * 0.2 };
         }
@@ -315,7 +315,7 @@ fn paired_triangle_test_equals_the_single_ray_test() {
         for g in &bvh.groups {
             let mut got = [[LaneHit::default(); LANES]; 2];
             // SAFETY: AVX2 checked above.
-            let m2 = unsafe { kernels::intersect_group_x2(g, [&rt[0], &rt[1]], [&sh[0], &sh[1]], tmin, tmax, &mut got) };
+            let m2 = unsafe { triangle::intersect_group_x2(g, [&rt[0], &rt[1]], [&sh[0], &sh[1]], tmin, tmax, &mut got) };
             let mut got4 = [[LaneHit::default(); LANES]; 4];
             // Rays 0, 1, 0, 1 in the four lanes of the AVX-512 kernel.
             // SAFETY: checked by `avx512_on`.
@@ -344,14 +344,14 @@ fn paired_triangle_test_equals_the_single_ray_test() {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f")]
-unsafe fn avx512_box_test(soa: &super::packet::RaysSoA, f: &frustum::Frustum, node: &Node<8>, lane: usize, tmax: &[f32; frustum::PACKET]) -> u64 {
+unsafe fn avx512_box_test(soa: &super::packet::RaysSoA, f: &frustum::Frustum, node: &Node<8>, lane: usize, tmax: &[f32; packet::PACKET]) -> u64 {
     soa.test512(&f.near_plane, node, lane, tmax)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f")]
 unsafe fn avx512_group_test(g: &TriGroup, rt: [&RayTransform; 4], sh: [&Shear; 4], tmin: [f32; 4], tmax: [f32; 4], out: &mut [[LaneHit; LANES]; 4]) -> [u32; 4] {
-    kernels::intersect_group_x4(g, rt, sh, tmin, tmax, out)
+    triangle::intersect_group_x4(g, rt, sh, tmin, tmax, out)
 }
 
 #[test]
@@ -361,7 +361,7 @@ fn frustum_accepts_coherent_packets() {
         return;
     }
     let rays = tight_packets(100, 4);
-    let accepted = rays.chunks(frustum::PACKET).filter(|p| frustum::Frustum::new(p, false).is_some()).count();
+    let accepted = rays.chunks(packet::PACKET).filter(|p| frustum::Frustum::new(p, false).is_some()).count();
     // The tight three quarters all share signs unless a direction
     // component is within 1e-3 of zero.
     assert!(accepted >= 70, "only {accepted} of 100 packets traced as frusta");
@@ -551,7 +551,7 @@ fn masked_shadow_packets_match_brute_force() {
     #[target_feature(enable = "avx2")]
     unsafe fn masked(bvh: &WideBvh<8>, rays: &[Ray], order: ChildOrder) -> Vec<bool> {
         let mut out = vec![true; rays.len()];
-        for (r, o) in rays.chunks(frustum::PACKET).zip(out.chunks_mut(frustum::PACKET)) {
+        for (r, o) in rays.chunks(packet::PACKET).zip(out.chunks_mut(packet::PACKET)) {
             bvh.any_masked(&super::packet::RaysSoA::new(r), r, o, order);
         }
         out
