@@ -1,0 +1,67 @@
+//! Trace one bench ray set through one backend for a while, single
+//! threaded: the workload to put under a profiler (`perf record`), which
+//! `pathtracer bench` mixes with builds and other contenders.
+//!
+//! ```text
+//! cargo run --release --example trace_rays -- SCENE BACKEND KIND SECONDS
+//! perf record -g target/release/examples/trace_rays subdiv:bunny:1.5M native random 10
+//! ```
+//! SCENE is a bench scene name or file; BACKEND a `--backend` value; KIND
+//! `camera`, `shadow` or `random` (the bench's rays and batch calls).
+
+use clap::ValueEnum;
+use pathtracer::accel::{self, BackendKind};
+use pathtracer::bench::{camera_rays, load_bench_scene, random_rays, shadow_rays};
+use pathtracer::camera::Camera;
+use std::time::Instant;
+
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("trace_rays: {e}");
+        std::process::exit(1);
+    }
+}
+
+fn run() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let [scene, backend, kind, seconds] = args.as_slice() else {
+        return Err("usage: trace_rays SCENE BACKEND camera|shadow|random SECONDS".into());
+    };
+    let backend = BackendKind::from_str(backend, true)?;
+    let seconds: f64 = seconds.parse().map_err(|_| format!("SECONDS: not a number: {seconds}"))?;
+    let scene = load_bench_scene(scene).map_err(|e| e.to_string())?;
+    let built = accel::build(backend, &scene.shapes, 0).map_err(|e| e.to_string())?;
+    let accel = built.accel.as_ref();
+    let n = 1 << 20;
+    let mut cam = Camera::from_scene(&scene);
+    cam.set_screen_size(1024, 1024);
+    let rays = match kind.as_str() {
+        "camera" => camera_rays(&cam, 1024, 1024),
+        "shadow" => shadow_rays(&scene, accel, &camera_rays(&cam, 1024, 1024)),
+        "random" => random_rays(&scene, n, 1),
+        k => return Err(format!("KIND: camera, shadow or random, not {k}")),
+    };
+    let start = Instant::now();
+    let (mut traced, mut hits) = (0usize, 0usize);
+    while start.elapsed().as_secs_f64() < seconds {
+        for chunk in rays.chunks(4096) {
+            if kind == "shadow" {
+                let mut out = vec![false; chunk.len()];
+                accel.occluded_coherent(chunk, &mut out);
+                hits += out.iter().filter(|&&o| o).count();
+            } else {
+                let mut out = vec![None; chunk.len()];
+                if kind == "camera" {
+                    accel.intersect_coherent(chunk, &mut out);
+                } else {
+                    accel.intersect_batch(chunk, &mut out);
+                }
+                hits += out.iter().filter(|h| h.is_some()).count();
+            }
+        }
+        traced += rays.len();
+    }
+    let t = start.elapsed().as_secs_f64();
+    println!("{} {backend} {kind}: {traced} rays, {hits} hits, {:.2} Mrays/s (1 thread)", scene.name, traced as f64 / t / 1e6);
+    Ok(())
+}
