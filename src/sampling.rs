@@ -13,6 +13,17 @@ pub fn uniform_hemisphere(u1: f32, u2: f32) -> Vec3 {
 
 pub const UNIFORM_HEMISPHERE_PDF: f32 = 1.0 / (2.0 * PI);
 
+/// Concentric map of the unit square onto the unit disk (Shirley–Chiu).
+pub fn concentric_disk(u: (f32, f32)) -> (f32, f32) {
+    let (a, b) = (2.0 * u.0 - 1.0, 2.0 * u.1 - 1.0);
+    if a == 0.0 && b == 0.0 {
+        return (0.0, 0.0);
+    }
+    let (r, phi) = if a.abs() > b.abs() { (a, PI / 4.0 * (b / a)) } else { (b, PI / 2.0 - PI / 4.0 * (a / b)) };
+    (r * phi.cos(), r * phi.sin())
+}
+
+
 /// Cosine-weighted on the hemisphere around +z (Malley). pdf cos(theta)/pi.
 pub fn cosine_hemisphere(u1: f32, u2: f32) -> Vec3 {
     let r = u1.sqrt();

@@ -193,7 +193,6 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         let path_only = [
             (a.light_samples.is_some(), "-l"),
             (a.hemisphere, "-H"),
-            (a.environment.is_some(), "-e (environment maps are lights at infinity, not supported yet by this integrator)"),
             (adaptive.is_some(), "-a (a pixel's stopping rule cannot see the light other pixels' samples splat into it)"),
             (a.split == Some(SplitArg::Tiles), "--split tiles (a tile's light subpaths light other tiles)"),
         ];

@@ -8,19 +8,23 @@
 //!   (emission is one-sided, see `light`): pdf_pos = 1/area, pdf_dir = cos/π;
 //! * point lights: the light's position (a delta in position, pdf_pos = 1)
 //!   and a uniform direction, pdf_dir = 1/(4π);
-//! * lights at infinity (directional, hemisphere, environment) have no
-//!   emission sampling here: they need rays from a disk beyond the scene
-//!   (pbrt-v4's `DistantLight::SampleLe`), which is not built. The
-//!   integrators that need this refuse such scenes by name
-//!   (`Light::emits_rays`), never approximating them.
+//! * lights at infinity (directional, hemisphere, environment map): a
+//!   direction toward the light drawn as next-event estimation draws it
+//!   (`Light::sample`: the map's importance sampling, uniform over the
+//!   hemisphere, the directional light's one direction), then a point
+//!   uniform on the disk of the scene's bounding sphere facing it
+//!   (`World`), the ray leaving that disk into the scene: pdf_pos =
+//!   1/(πR²) per area of the disk, pdf_dir = the direction's density (1 for
+//!   the directional light's delta), as pbrt-v4's `SampleLe` for distant
+//!   and infinite lights.
 //!
 //! Which light emits is chosen in proportion to its power (`LightPower`),
 //! independent of position, as pbrt-v4's `PowerLightSampler`: the same
 //! choice starts light subpaths and picks the light of a next-event
 //! connection, so both strategies' densities agree in the MIS weights.
 
-use super::Light;
-use crate::sampling::{cosine_hemisphere, magnitude, uniform_sphere, uniform_triangle, Frame};
+use super::{EnvAt, Light};
+use crate::sampling::{concentric_disk, cosine_hemisphere, magnitude, uniform_sphere, uniform_triangle, Frame};
 use crate::scene::{Scene, Shape};
 use glam::Vec3;
 use std::f32::consts::PI;
@@ -46,11 +50,42 @@ pub struct Emission {
     pub prim: u32,
 }
 
+/// The scene's bounding sphere, which rays from lights at infinity enter
+/// through.
+#[derive(Clone, Copy, Debug)]
+pub struct World {
+    pub center: Vec3,
+    pub radius: f32,
+}
+
+impl World {
+    pub fn of(scene: &Scene) -> World {
+        let b = scene.bounds();
+        let radius = (b.extent().length() * 0.5).max(1e-3);
+        World { center: b.center(), radius: if radius.is_finite() { radius } else { 1.0 } }
+    }
+
+    /// Area density of a point uniform on the disk facing a direction.
+    pub fn disk_pdf(&self) -> f32 {
+        1.0 / (PI * self.radius * self.radius)
+    }
+}
+
 impl Light {
-    /// Whether this light can start rays (`sample_emission`): every light
-    /// but those at infinity.
-    pub fn emits_rays(&self) -> bool {
-        matches!(self, Light::Point { .. } | Light::Rect { .. } | Light::Mesh { .. } | Light::Sphere { .. })
+    /// Whether this light lies at infinity (directional, hemisphere,
+    /// environment map): rays from it start on the `World` disk.
+    pub fn is_at_infinity(&self) -> bool {
+        matches!(self, Light::Directional { .. } | Light::Hemisphere { .. } | Light::Environment(_))
+    }
+
+    /// For a light at infinity, the solid-angle density with which
+    /// `sample_emission` (and next-event estimation) picks direction
+    /// `to_light`; 1 for the directional light's delta.
+    pub fn infinite_pdf_dir(&self, to_light: Vec3) -> f32 {
+        match self {
+            Light::Directional { .. } => 1.0,
+            _ => self.pdf_escape(to_light, EnvAt::Map),
+        }
     }
 
     /// Whether a ray can hit this light (an emissive surface of the scene):
@@ -68,33 +103,50 @@ impl Light {
         }
     }
 
-    /// Emitted power (luminance-weighted), up to the common factor π for
-    /// area lights: what the light choice is proportional to.
-    pub fn power(&self) -> f32 {
+    /// Emitted power (luminance-weighted): what the light choice is
+    /// proportional to. Lights at infinity: the power entering the scene's
+    /// bounding sphere, πR² × irradiance (directional) or × ∫L dω.
+    pub fn power(&self, world: &World) -> f32 {
         let lum = |c: Vec3| crate::render::illuminance(c).max(0.0);
         match self {
             Light::Point { intensity, .. } => 4.0 * PI * lum(*intensity),
             Light::Rect { ex, ey, radiance, .. } => PI * ex.cross(*ey).length() * lum(*radiance),
             Light::Mesh { area, radiance, .. } => PI * area * lum(*radiance),
             Light::Sphere { radius, radiance, .. } => PI * 4.0 * PI * radius * radius * lum(*radiance),
-            _ => 0.0,
+            Light::Directional { irradiance, .. } => lum(*irradiance) / world.disk_pdf(),
+            Light::Hemisphere { radiance, .. } => 2.0 * PI * lum(*radiance) / world.disk_pdf(),
+            Light::Environment(e) => {
+                // ∫ L dω by the midpoint rule over 128 × 64 (θ, φ) cells.
+                let (nt, np) = (64, 128);
+                let (dt, dp) = (PI / nt as f32, 2.0 * PI / np as f32);
+                let mut sum = 0.0f64;
+                for i in 0..nt {
+                    let theta = (i as f32 + 0.5) * dt;
+                    for j in 0..np {
+                        let phi = (j as f32 + 0.5) * dp;
+                        let d = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                        sum += (lum(e.eval(d)) * theta.sin() * dt * dp) as f64;
+                    }
+                }
+                sum as f32 / world.disk_pdf()
+            }
         }
     }
 
     /// Area density with which `sample_emission` picks its points (1 for a
-    /// point light, 0 for lights that emit no rays).
-    pub fn emission_pdf_pos(&self) -> f32 {
+    /// point light; per area of the `World` disk for lights at infinity).
+    pub fn emission_pdf_pos(&self, world: &World) -> f32 {
         match self {
             Light::Point { .. } => 1.0,
             Light::Rect { ex, ey, .. } => 1.0 / ex.cross(*ey).length(),
             Light::Mesh { area, .. } => 1.0 / area,
             Light::Sphere { radius, .. } => 1.0 / (4.0 * PI * radius * radius),
-            _ => 0.0,
+            Light::Directional { .. } | Light::Hemisphere { .. } | Light::Environment(_) => world.disk_pdf(),
         }
     }
 
     /// Solid-angle density of `sample_emission` sending `dir` from a point
-    /// whose emitting normal is `n`.
+    /// whose emitting normal is `n` (lights at finite distance).
     pub fn emission_pdf_dir(&self, n: Vec3, dir: Vec3) -> f32 {
         match self {
             Light::Point { .. } => 1.0 / (4.0 * PI),
@@ -142,9 +194,21 @@ impl Light {
     }
 
     /// A ray leaving this light: `u_sel` picks a mesh's triangle, `u_pos`
-    /// the point, `u_dir` the direction. `None` for lights at infinity and
-    /// for a degenerate draw.
-    pub fn sample_emission(&self, scene: &Scene, u_sel: f32, u_pos: (f32, f32), u_dir: (f32, f32)) -> Option<Emission> {
+    /// the point, `u_dir` the direction. `None` for a degenerate draw. A
+    /// light at infinity's ray starts on the `World` disk facing the drawn
+    /// direction, `n` zero.
+    pub fn sample_emission(&self, scene: &Scene, world: &World, u_sel: f32, u_pos: (f32, f32), u_dir: (f32, f32)) -> Option<Emission> {
+        if self.is_at_infinity() {
+            let ls = self.sample(scene, world.center, u_dir, u_sel, EnvAt::Map)?;
+            let to_light = ls.wi;
+            if !(ls.pdf > 0.0) || ls.value == Vec3::ZERO {
+                return None;
+            }
+            let (dx, dy) = concentric_disk(u_pos);
+            let f = Frame::new(to_light);
+            let p = world.center + world.radius * (to_light + f.to_world(Vec3::new(dx, dy, 0.0)));
+            return Some(Emission { p, n: Vec3::ZERO, dir: -to_light, le: ls.value, pdf_pos: world.disk_pdf(), pdf_dir: ls.pdf, magnitude: p.abs().max_element(), prim: 0 });
+        }
         let (p, n, le, magnitude, prim) = match self {
             Light::Point { position, intensity } => {
                 let dir = uniform_sphere(u_dir.0, u_dir.1);
@@ -173,31 +237,38 @@ impl Light {
         let local = cosine_hemisphere(u_dir.0, u_dir.1);
         let dir = Frame::new(n).to_world(local);
         let pdf_dir = local.z / PI;
-        (pdf_dir > 0.0).then_some(Emission { p, n, dir, le, pdf_pos: self.emission_pdf_pos(), pdf_dir, magnitude, prim })
+        (pdf_dir > 0.0).then_some(Emission { p, n, dir, le, pdf_pos: self.emission_pdf_pos(world), pdf_dir, magnitude, prim })
     }
 }
 
 /// The choice of the emitting light, in proportion to power.
 #[derive(Clone, Debug)]
 pub struct LightPower {
-    /// Running sums of the lights' powers (0 for lights that emit no rays).
+    /// Running sums of the lights' powers.
     cdf: Vec<f32>,
     total: f32,
+    world: World,
 }
 
 impl LightPower {
-    pub fn new(lights: &[Light]) -> LightPower {
+    pub fn new(lights: &[Light], world: World) -> LightPower {
         let mut acc = 0.0f32;
         let cdf = lights
             .iter()
             .map(|l| {
-                if l.emits_rays() {
-                    acc += l.power();
+                let p = l.power(&world);
+                if p.is_finite() && p > 0.0 {
+                    acc += p;
                 }
                 acc
             })
             .collect();
-        LightPower { cdf, total: acc }
+        LightPower { cdf, total: acc, world }
+    }
+
+    /// The bounding sphere rays from lights at infinity enter through.
+    pub fn world(&self) -> &World {
+        &self.world
     }
 
     /// Whether any light emits.
@@ -237,7 +308,7 @@ mod tests {
         let scene = crate::scene::builtin::load().unwrap();
         for i in 0..64 {
             let u = |k: u32| ((i * 7 + k * 13) % 64) as f32 / 64.0 + 1.0 / 128.0;
-            let e = l.sample_emission(&scene, 0.5, (u(0), u(1)), (u(2), u(3))).unwrap();
+            let e = l.sample_emission(&scene, &World::of(&scene), 0.5, (u(0), u(1)), (u(2), u(3))).unwrap();
             assert!(e.p.x >= 0.0 && e.p.x <= 2.0 && e.p.y >= 0.0 && e.p.y <= 1.0 && e.p.z == 0.0);
             assert!(e.dir.z > 0.0 && (e.dir.length() - 1.0).abs() < 1e-5);
             assert_eq!(e.pdf_pos, 0.5);
@@ -253,12 +324,16 @@ mod tests {
             Light::Directional { to_light: Vec3::Y, irradiance: Vec3::ONE },
             Light::Sphere { center: Vec3::ZERO, radius: 1.0, radiance: Vec3::ONE, cone: true },
         ];
-        let p = LightPower::new(&lights);
-        // Point: 4π; sphere: 4π²; the directional light emits no rays.
-        let (a, b) = (4.0 * PI, 4.0 * PI * PI);
-        assert!((p.pmf(0) - a / (a + b)).abs() < 1e-6 && p.pmf(1) == 0.0 && (p.pmf(2) - b / (a + b)).abs() < 1e-6);
+        let world = World { center: Vec3::ZERO, radius: 2.0 };
+        let p = LightPower::new(&lights, world);
+        // Point: 4π; directional: its irradiance over the world's disk, 4π;
+        // sphere: 4π².
+        let (a, d, b) = (4.0 * PI, 4.0 * PI, 4.0 * PI * PI);
+        let total = a + d + b;
+        assert!((p.pmf(0) - a / total).abs() < 1e-6 && (p.pmf(1) - d / total).abs() < 1e-6 && (p.pmf(2) - b / total).abs() < 1e-6);
         assert_eq!(p.pick(0.0).unwrap().0, 0);
         assert_eq!(p.pick(0.99).unwrap().0, 2);
-        assert!(LightPower::new(&lights[1..2]).pick(0.5).is_none());
+        let dark = [Light::Point { position: Vec3::ZERO, intensity: Vec3::ZERO }];
+        assert!(LightPower::new(&dark, world).pick(0.5).is_none());
     }
 }

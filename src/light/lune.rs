@@ -18,21 +18,12 @@
 //! affinely from the chord [−w, w] onto [−c·w, w], w = √(1−q²): uniform
 //! stays uniform, and the lift is cosine-distributed over the lune.
 
+use crate::sampling::concentric_disk;
 use glam::Vec3;
 use std::f32::consts::PI;
 
 /// The sky's up direction (CS184's hemisphere light is the +y half).
 const UP: Vec3 = Vec3::Y;
-
-/// Concentric map of the unit square onto the unit disk (Shirley–Chiu).
-fn concentric_disk(u: (f32, f32)) -> (f32, f32) {
-    let (a, b) = (2.0 * u.0 - 1.0, 2.0 * u.1 - 1.0);
-    if a == 0.0 && b == 0.0 {
-        return (0.0, 0.0);
-    }
-    let (r, phi) = if a.abs() > b.abs() { (a, PI / 4.0 * (b / a)) } else { (b, PI / 2.0 - PI / 4.0 * (a / b)) };
-    (r * phi.cos(), r * phi.sin())
-}
 
 /// The tangent towards the sky and the other tangent, for normal `n`.
 fn tangents(n: Vec3) -> (Vec3, Vec3) {

@@ -3,7 +3,9 @@
 //! unweighted contribution, or nothing when it is zero or occluded:
 //!
 //! * s = 0: the camera subpath ends on an emitter: its radiance toward
-//!   z(t−2), times the camera throughput;
+//!   z(t−2), times the camera throughput; or it escaped, and a light at
+//!   infinity (`Kind::Distant`, one strategy per such light) sends its
+//!   radiance along the escape;
 //! * t = 1 (light tracing): a lens point chosen toward y(s−1)
 //!   (`Sensor::sample_toward`); the contribution lands where that ray meets
 //!   the film, usually another pixel (a splat);
@@ -36,6 +38,9 @@ impl Bdpt<'_> {
         };
         if s == 0 {
             let z = &camera[t - 1];
+            if let Kind::Distant(k) = z.kind {
+                return done(z.beta * self.lights.lights[k].escaped(z.it.ns), None, None);
+            }
             if z.kind != Kind::Surface || z.light(self.lights).is_none() {
                 return None;
             }
@@ -47,11 +52,12 @@ impl Bdpt<'_> {
                 return None;
             }
             // A point light seen directly, or a rectangle that rays cannot
-            // hit: no camera ray sees them, and neither does this.
-            if let Kind::Light(k) = y.kind {
-                if !self.lights.lights[k].is_hittable() {
-                    return None;
-                }
+            // hit: no camera ray sees them, and neither does this; nor a
+            // light at infinity, which has no point to aim the lens at.
+            match y.kind {
+                Kind::Light(k) if !self.lights.lights[k].is_hittable() => return None,
+                Kind::Distant(_) => return None,
+                _ => {}
             }
             let ls = self.camera.sample_toward(y.p(), sampler.get_2d(dim::light_vertex(s as u32 - 1, dim::LENS_CONNECT)))?;
             let value = y.beta * y.f(ls.lens, Mode::Importance) * y.cos(ls.wi) * ls.weight;
@@ -74,10 +80,23 @@ impl Bdpt<'_> {
             let (k, pmf) = self.power.pick(sampler.slot_1d(dim::CONNECT_PICK, 0))?;
             let l = &self.lights.lights[k];
             let ls = l.sample(self.scene, z.p(), sampler.slot_2d(dim::CONNECT_POINT, 0), sampler.slot_1d(dim::CONNECT_SELECT, 0), EnvAt::Map)?;
-            let Target::Point(target) = ls.target else { return None };
             if !(ls.pdf > 0.0) {
                 return None;
             }
+            let Target::Point(target) = ls.target else {
+                // A light at infinity: a direction, the shadow ray unbounded.
+                let value = z.beta * z.f_dir(ls.wi, Mode::Radiance) * z.cos(ls.wi) * ls.value / (ls.pdf * pmf);
+                if !(value.max_element() > 0.0) {
+                    return None;
+                }
+                *rays += 1;
+                if self.accel.occluded(&z.it.spawn_ray(ls.wi)) {
+                    return None;
+                }
+                let origin_pdf = pmf * l.infinite_pdf_dir(ls.wi);
+                let y0 = Vertex::distant(k, Vec3::ZERO, ls.wi, ls.value / (ls.pdf * pmf), origin_pdf);
+                return done(value, Some(y0), None);
+            };
             let n = l.normal_at(self.scene, target, ls.prim);
             let value = z.beta * z.f(target, Mode::Radiance) * z.cos(ls.wi) * ls.value / (ls.pdf * pmf);
             if !(value.max_element() > 0.0) {
@@ -87,7 +106,7 @@ impl Bdpt<'_> {
             if self.accel.occluded(&z.it.spawn_ray_to(target)) {
                 return None;
             }
-            let origin_pdf = pmf * l.emission_pdf_pos();
+            let origin_pdf = pmf * l.emission_pdf_pos(self.power.world());
             let y0 = Vertex::at_point(Kind::Light(k), target, n, target.abs().max_element(), l.geometry(), ls.prim, ls.value / (ls.pdf * pmf), origin_pdf);
             return done(value, Some(y0), None);
         }

@@ -69,9 +69,14 @@ impl Bdpt<'_> {
     /// a_nee / a_emit of light point `y0` connected to `y1` (see the module
     /// comment); 1 where `y0` is not on a light.
     pub(super) fn nee_ratio(&self, y0: &Vertex, y1: &Vertex) -> f64 {
+        // A light at infinity: next-event estimation draws its directions
+        // as its light subpaths do (`Light::sample` either way).
+        if y0.is_at_infinity() {
+            return 1.0;
+        }
         let Some(k) = y0.light(self.lights) else { return 1.0 };
         let l = &self.lights.lights[k];
-        let emit = l.emission_pdf_pos();
+        let emit = l.emission_pdf_pos(self.power.world());
         let nee = l.sample_pdf_area(self.scene, y1.p(), y0.p(), y0.it.ng, y0.it.prim_id);
         if emit > 0.0 && nee > 0.0 && (nee / emit).is_finite() {
             (nee / emit) as f64
@@ -109,24 +114,24 @@ impl Bdpt<'_> {
         if s > 0 {
             lig[s - 1].delta = false;
         }
-        let (lights, camera_model) = (self.lights, &self.camera);
+        let (lights, power, camera_model) = (self.lights, &self.power, &self.camera);
         // z(t-1) made from the light side.
         cam[t - 1].rev = match &ys {
-            Some(y) => y.pdf(lights, camera_model, (s > 1).then(|| &light[s - 2]), &zt),
-            None => zt.pdf_light_origin(lights, &self.power),
+            Some(y) => y.pdf(lights, power, camera_model, (s > 1).then(|| &light[s - 2]), &zt),
+            None => zt.pdf_light_origin(lights, power),
         };
         // z(t-2) made from z(t-1).
         if t > 1 {
             cam[t - 2].rev = match &ys {
-                Some(y) => zt.pdf(lights, camera_model, Some(y), &camera[t - 2]),
-                None => zt.pdf_light(lights, &camera[t - 2]),
+                Some(y) => zt.pdf(lights, power, camera_model, Some(y), &camera[t - 2]),
+                None => zt.pdf_light(lights, power, &camera[t - 2]),
             };
         }
         if let Some(y) = &ys {
             // y(s-1) made from the camera side, and y(s-2) from y(s-1).
-            lig[s - 1].rev = zt.pdf(lights, camera_model, (t > 1).then(|| &camera[t - 2]), y);
+            lig[s - 1].rev = zt.pdf(lights, power, camera_model, (t > 1).then(|| &camera[t - 2]), y);
             if s > 1 {
-                lig[s - 2].rev = y.pdf(lights, camera_model, Some(&zt), &light[s - 2]);
+                lig[s - 2].rev = y.pdf(lights, power, camera_model, Some(&zt), &light[s - 2]);
             }
         }
         // a_nee / a_emit for y0 of this path: the next-event density of y0
@@ -160,9 +165,14 @@ impl Bdpt<'_> {
             let before_is_delta = if i > 0 {
                 lig[i - 1].delta
             } else {
-                // s' = 0: the camera path must hit the light by chance.
+                // s' = 0: the camera path must hit the light by chance
+                // (or escape toward it, for a light at infinity).
                 let y0 = pick(0, light, s == 1);
-                !matches!(y0.kind, Kind::Light(k) if lights.lights[k].is_hittable())
+                match y0.kind {
+                    Kind::Light(k) => !lights.lights[k].is_hittable(),
+                    Kind::Distant(k) => !lights.lights[k].is_visible(),
+                    _ => true,
+                }
             };
             if !lig[i].delta && !before_is_delta {
                 // (i, s + t − i): s' = 1 when i = 1.

@@ -27,9 +27,13 @@
 //! shading-normal correction on light subpaths (pbrt-v4 omits it, which its
 //! users found makes BDPT and path tracing disagree); Russian roulette on
 //! both subpaths (`subpath`); next-event points drawn by solid angle
-//! (`connect`); exact splats. Not supported, and refused by the command
-//! line with a line naming them: lights at infinity (directional,
-//! hemisphere, environment map), adaptive sampling (`-a`: a pixel's
+//! (`connect`); exact splats. Lights at infinity (directional, hemisphere,
+//! environment map) start light subpaths on the disk of the scene's
+//! bounding sphere facing their direction, as in pbrt-v4; the environment
+//! map's directions are drawn by its own importance sampling alone (the
+//! path tracer's products with the cosine and with glossy lobes are not
+//! used here). Not supported, and refused by the command line with a line
+//! naming them: adaptive sampling (`-a`: a pixel's
 //! stopping rule cannot see the light its neighbours' samples splat into
 //! it) and tile splits (a tile's light subpaths light other tiles).
 //!
@@ -46,13 +50,13 @@ use crate::accel::{Hit, Traversal};
 use crate::camera::importance::Sensor;
 use crate::camera::Camera;
 use crate::error::Result;
-use crate::light::emission::LightPower;
+use crate::light::emission::{LightPower, World};
 use crate::light::Lights;
 use crate::ray::Ray;
 use crate::sampler::Sampler;
 use crate::scene::Scene;
 use glam::Vec3;
-use vertex::Vertex;
+use vertex::{Kind, Vertex};
 
 /// Which strategies a render sums.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -82,11 +86,13 @@ pub struct Bdpt<'a> {
     /// Pixels rendered ÷ pixels of the frame: light tracing's sample count
     /// per pixel relative to the camera's (see `mis`).
     light_tracing_share: f64,
+    /// The lights at infinity that an escaping camera ray sees (hemisphere,
+    /// environment map): strategy s = 0 for each.
+    sky: Vec<usize>,
 }
 
 impl<'a> Bdpt<'a> {
     /// The integrator for a render of `region` of a `width`×`height` frame.
-    /// Refuses lights it cannot start paths from (those at infinity).
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         scene: &'a Scene,
@@ -100,16 +106,10 @@ impl<'a> Bdpt<'a> {
         accumulate: bool,
         technique: Technique,
     ) -> Result<Bdpt<'a>> {
-        if let Some(l) = lights.lights.iter().find(|l| !l.emits_rays()) {
-            crate::bail!(
-                "{}: the {} is a light at infinity, which the bidirectional and light-tracing integrators do not support yet; use --integrator path",
-                scene.source,
-                l.describe()
-            );
-        }
-        let power = LightPower::new(&lights.lights);
+        let power = LightPower::new(&lights.lights, World::of(scene));
         let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
-        Ok(Bdpt { scene, accel, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share })
+        let sky = (0..lights.lights.len()).filter(|&k| lights.lights[k].is_at_infinity() && lights.lights[k].is_visible()).collect();
+        Ok(Bdpt { scene, accel, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky })
     }
 
     /// Whether strategy (s, t) is summed.
@@ -120,7 +120,9 @@ impl<'a> Bdpt<'a> {
         }
         match self.technique {
             Technique::Bidirectional => !(s == 1 && t == 1),
-            Technique::LightTracing => t == 1 && s >= 1,
+            // And the lights at infinity seen directly (s = 0, t = 2, for
+            // escaped camera rays only: see `radiance_splat`).
+            Technique::LightTracing => (t == 1 && s >= 1) || (s == 0 && t == 2),
             Technique::Strategy { s: ss, t: tt, .. } => (s, t) == (ss, tt) && !(s == 1 && t == 1),
         }
     }
@@ -151,7 +153,8 @@ impl Integrator for Bdpt<'_> {
     fn radiance_splat(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
         let m = self.max_depth as usize;
         let camera_vertices = match self.technique {
-            Technique::LightTracing => 1,
+            // The camera ray's own end, for the lights at infinity it sees.
+            Technique::LightTracing => 1 + !self.sky.is_empty() as usize,
             _ => m + 2,
         };
         let mut camera: Vec<Vertex> = Vec::with_capacity(camera_vertices);
@@ -165,19 +168,44 @@ impl Integrator for Bdpt<'_> {
                 if !self.uses(s, t) {
                     continue;
                 }
-                let Some(c) = self.connect(&light, &camera, s, t, sampler, rays) else { continue };
-                let w = if self.weighted() { self.mis_weight(&light, &camera, c.sampled.as_ref(), s, t, light_nee_ratio) } else { 1.0 };
-                let value = c.value * w;
-                match c.film {
-                    Some((x, y)) => splats.push(Splat {
-                        x: ((x * self.width as f32) as u32).min(self.width - 1),
-                        y: ((y * self.height as f32) as u32).min(self.height - 1),
-                        l: value,
-                    }),
-                    None => l += value,
+                if s == 0 && camera[t - 1].kind == Kind::Escaped {
+                    // One strategy per light at infinity the escape sees.
+                    let mut ends = camera[..t].to_vec();
+                    for &k in &self.sky {
+                        ends[t - 1].kind = Kind::Distant(k);
+                        l += self.strategy(&light, &ends, s, t, sampler, rays, splats, light_nee_ratio);
+                    }
+                    continue;
                 }
+                if s == 0 && self.technique == Technique::LightTracing {
+                    // Emitters the camera ray hits are light tracing's (s = 1, t = 1).
+                    continue;
+                }
+                l += self.strategy(&light, &camera, s, t, sampler, rays, splats, light_nee_ratio);
             }
         }
         l
+    }
+}
+
+impl Bdpt<'_> {
+    /// Strategy (s, t)'s weighted contribution to this pixel; a light-
+    /// tracing one goes to `splats` instead.
+    #[allow(clippy::too_many_arguments)]
+    fn strategy(&self, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, sampler: &mut Sampler, rays: &mut u64, splats: &mut Vec<Splat>, light_nee_ratio: f64) -> Vec3 {
+        let Some(c) = self.connect(light, camera, s, t, sampler, rays) else { return Vec3::ZERO };
+        let w = if self.weighted() { self.mis_weight(light, camera, c.sampled.as_ref(), s, t, light_nee_ratio) } else { 1.0 };
+        let value = c.value * w;
+        match c.film {
+            Some((x, y)) => {
+                splats.push(Splat {
+                    x: ((x * self.width as f32) as u32).min(self.width - 1),
+                    y: ((y * self.height as f32) as u32).min(self.height - 1),
+                    l: value,
+                });
+                Vec3::ZERO
+            }
+            None => value,
+        }
     }
 }

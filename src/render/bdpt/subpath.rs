@@ -16,8 +16,12 @@
 //!   throughput divided by it). The camera side divides out the η² its
 //!   radiance carries through glass, as the path tracer does. Survival is not
 //!   in the densities (see `mis`). pbrt-v4's BDPT has no roulette.
-//! * Paths that leave the scene end: the lights at infinity are not
-//!   supported by this integrator (the command line refuses them).
+//! * A light at infinity starts its subpath on the disk of the scene's
+//!   bounding sphere that faces the drawn direction (`emission`), its first
+//!   vertex a direction (`Kind::Distant`).
+//! * A camera subpath that leaves the scene ends with an `Escaped` vertex
+//!   when some light at infinity can be seen (strategy s = 0); a light
+//!   subpath that leaves the scene just ends.
 
 use super::vertex::{Kind, Mode, Vertex};
 use super::Bdpt;
@@ -56,7 +60,21 @@ impl Bdpt<'_> {
         let draw2 = |slot| sampler.get_2d(dim::light_vertex(0, slot));
         let Some((k, pmf)) = self.power.pick(sampler.get_1d(dim::light_vertex(0, dim::EMIT_PICK))) else { return };
         let light = &self.lights.lights[k];
-        let Some(e) = light.sample_emission(self.scene, sampler.get_1d(dim::light_vertex(0, dim::EMIT_SELECT)), draw2(dim::EMIT_POINT), draw2(dim::EMIT_DIRECTION)) else { return };
+        let world = self.power.world();
+        let Some(e) = light.sample_emission(self.scene, world, sampler.get_1d(dim::light_vertex(0, dim::EMIT_SELECT)), draw2(dim::EMIT_POINT), draw2(dim::EMIT_DIRECTION)) else { return };
+        if light.is_at_infinity() {
+            // The direction is the light's "position": its density starts
+            // the chain; the next vertex gets the disk's (see `vertex`).
+            let origin_pdf = pmf * e.pdf_dir;
+            path.push(Vertex::distant(k, e.p, -e.dir, e.le / origin_pdf, origin_pdf));
+            let beta = e.le / (origin_pdf * e.pdf_pos);
+            if max < 2 || !beta.is_finite() || beta == Vec3::ZERO {
+                return;
+            }
+            let ray = Ray::new(e.p, e.dir);
+            self.walk(ray, None, beta, e.pdf_pos, Mode::Importance, sampler, path, max, rays);
+            return;
+        }
         let origin_pdf = pmf * e.pdf_pos;
         let y0 = Vertex::at_point(Kind::Light(k), e.p, e.n, e.magnitude, light.geometry(), e.prim, e.le / origin_pdf, origin_pdf);
         path.push(y0);
@@ -73,9 +91,10 @@ impl Bdpt<'_> {
     }
 
     /// Extend `path` from its last vertex along `ray` (unit direction, drawn
-    /// with solid-angle density `pdf_dir`; `first`: its hit, already traced)
-    /// with throughput `beta`, until `max` vertices, an escape, an absorption
-    /// or Russian roulette.
+    /// with solid-angle density `pdf_dir`, or from a light at infinity with
+    /// its disk's area density; `first`: its hit, already traced) with
+    /// throughput `beta`, until `max` vertices, an escape, an absorption or
+    /// Russian roulette.
     #[allow(clippy::too_many_arguments)]
     fn walk(&self, mut ray: Ray, mut first: Option<Option<Hit>>, mut beta: Vec3, mut pdf_dir: f32, mode: Mode, sampler: &mut Sampler, path: &mut Vec<Vertex>, max: usize, rays: &mut u64) {
         let beta_start = beta.max_element();
@@ -88,11 +107,19 @@ impl Bdpt<'_> {
                     self.accel.intersect(&ray)
                 }
             };
-            let Some(hit) = hit else { return };
+            let Some(hit) = hit else {
+                if mode == Mode::Radiance && !self.sky.is_empty() {
+                    path.push(Vertex::escaped(ray.dir, beta, pdf_dir));
+                }
+                return;
+            };
             let it = Interaction::with_barycentrics(self.scene, &ray, &hit, self.accel.exact_barycentrics());
-            let prev_p = path.last().expect("a subpath starts with its end point").p();
+            let prev = path.last().expect("a subpath starts with its end point");
             let mut v = Vertex::surface(self.scene, it, -ray.dir, beta);
-            v.pdf_fwd = v.convert(pdf_dir, prev_p);
+            v.pdf_fwd = match prev.kind {
+                Kind::Distant(_) => pdf_dir * v.cos_ng(ray.dir),
+                _ => v.convert(pdf_dir, prev.p()),
+            };
             path.push(v);
             let i = path.len() - 1;
             if path.len() >= max {

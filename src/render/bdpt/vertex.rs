@@ -11,6 +11,12 @@
 //! surface, so no cosine. A delta (specular) vertex has both densities 0,
 //! which the weights read as "cancels out" (see `mis`).
 //!
+//! A light at infinity makes a vertex that is a direction, not a point
+//! (`Kind::Distant`, as pbrt-v4's infinite-light vertices): densities of
+//! it stay per solid angle (no conversion), and the vertex after it on a
+//! light subpath has the density of the disk its ray left (`World`)
+//! times |cos θ| there, with no distance.
+//!
 //! Light subpaths scatter with the adjoint BSDF (`f` with `Mode::Importance`):
 //! Veach's shading-normal correction |wo·ns||wi·ng| / (|wo·ng||wi·ns|)
 //! (thesis §5.3; pbrt-v3 and Mitsuba 3 apply it, pbrt-v4 omits it), and no
@@ -42,6 +48,11 @@ pub(crate) enum Kind {
     Light(usize),
     /// A surface a subpath reached.
     Surface,
+    /// Light `k`, at infinity: the direction toward it is `it.ns`.
+    Distant(usize),
+    /// A camera subpath that left the scene along `it.ns`; it becomes a
+    /// `Distant` vertex of each light at infinity it can see (strategy s = 0).
+    Escaped,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -87,8 +98,37 @@ impl Vertex {
         Vertex { kind: Kind::Surface, it, frame: Frame::new(ns), wo, bsdf, beta, pdf_fwd: 0.0, pdf_rev: 0.0, delta: false }
     }
 
+    /// The vertex of light `k` at infinity in direction `to_light` (unit);
+    /// `p`: where its ray left the `World` disk, when it started one.
+    pub fn distant(k: usize, p: Vec3, to_light: Vec3, beta: Vec3, pdf_fwd: f32) -> Vertex {
+        let it = Interaction { p, ng: Vec3::ZERO, ns: to_light, t: 0.0, magnitude: p.abs().max_element(), geom_id: u32::MAX, prim_id: 0 };
+        Vertex { kind: Kind::Distant(k), it, frame: Frame::new(to_light), wo: Vec3::ZERO, bsdf: None, beta, pdf_fwd, pdf_rev: 0.0, delta: false }
+    }
+
+    /// A camera subpath's escape along unit `dir`, reached with throughput
+    /// `beta` and solid-angle density `pdf_fwd`.
+    pub fn escaped(dir: Vec3, beta: Vec3, pdf_fwd: f32) -> Vertex {
+        Vertex { kind: Kind::Escaped, ..Vertex::distant(usize::MAX, Vec3::ZERO, dir, beta, pdf_fwd) }
+    }
+
     pub fn p(&self) -> Vec3 {
         self.it.p
+    }
+
+    /// Whether this vertex is a direction (a light at infinity, an escape).
+    pub fn is_at_infinity(&self) -> bool {
+        matches!(self.kind, Kind::Distant(_) | Kind::Escaped)
+    }
+
+    /// Unit direction from this vertex toward `other`.
+    pub fn dir_to(&self, other: &Vertex) -> Vec3 {
+        if other.is_at_infinity() {
+            other.it.ns
+        } else if self.is_at_infinity() {
+            -self.it.ns
+        } else {
+            (other.p() - self.p()).normalize_or_zero()
+        }
     }
 
     /// Whether densities arriving here are per area of a surface (with a
@@ -97,7 +137,7 @@ impl Vertex {
         match self.kind {
             Kind::Surface => true,
             Kind::Light(_) => self.it.ng != Vec3::ZERO,
-            Kind::Camera => false,
+            Kind::Camera | Kind::Distant(_) | Kind::Escaped => false,
         }
     }
 
@@ -105,13 +145,18 @@ impl Vertex {
     /// with a non-delta BSDF.
     pub fn connectible(&self) -> bool {
         match self.kind {
-            Kind::Camera | Kind::Light(_) => true,
+            Kind::Camera | Kind::Light(_) | Kind::Distant(_) => true,
             Kind::Surface => self.bsdf.is_some_and(|b| !b.is_delta()),
+            Kind::Escaped => false,
         }
     }
 
-    /// The area density here of a solid-angle density `pdf` at `from`.
+    /// The area density here of a solid-angle density `pdf` at `from`
+    /// (kept per solid angle at a vertex at infinity).
     pub fn convert(&self, pdf: f32, from: Vec3) -> f32 {
+        if self.is_at_infinity() {
+            return pdf;
+        }
         let d = self.p() - from;
         let d2 = d.length_squared();
         if !(d2 > 0.0) {
@@ -126,6 +171,7 @@ impl Vertex {
     pub fn cos(&self, w: Vec3) -> f32 {
         match self.kind {
             Kind::Surface => self.frame.n.dot(w).abs(),
+            Kind::Distant(_) | Kind::Escaped => 1.0,
             _ if self.it.ng == Vec3::ZERO => 1.0,
             _ => self.it.ng.dot(w).abs(),
         }
@@ -135,7 +181,11 @@ impl Vertex {
     /// `Mode::Importance`. At a light vertex: 1 on the emitting side (the
     /// emitters are Lambertian, so the direction changes nothing else).
     pub fn f(&self, q: Vec3, mode: Mode) -> Vec3 {
-        let wi = (q - self.p()).normalize_or_zero();
+        self.f_dir((q - self.p()).normalize_or_zero(), mode)
+    }
+
+    /// `f` toward unit direction `wi`.
+    pub fn f_dir(&self, wi: Vec3, mode: Mode) -> Vec3 {
         match self.kind {
             Kind::Surface => {
                 let Some(b) = &self.bsdf else { return Vec3::ZERO };
@@ -152,7 +202,18 @@ impl Vertex {
                     Vec3::ZERO
                 }
             }
-            Kind::Camera => Vec3::ZERO,
+            Kind::Distant(_) => Vec3::ONE,
+            Kind::Camera | Kind::Escaped => Vec3::ZERO,
+        }
+    }
+
+    /// |cos θ| between this surface's geometric normal and unit `w`: the
+    /// disk density of a ray from a light at infinity, per area here.
+    pub fn cos_ng(&self, w: Vec3) -> f32 {
+        if self.has_normal() {
+            self.it.ng.dot(w).abs()
+        } else {
+            1.0
         }
     }
 
@@ -171,16 +232,18 @@ impl Vertex {
 
     /// The area density with which this vertex, having been reached from
     /// `prev` (ignored by the camera and lights), generates `next`.
-    pub fn pdf(&self, lights: &Lights, camera: &crate::camera::importance::Sensor, prev: Option<&Vertex>, next: &Vertex) -> f32 {
-        let w = (next.p() - self.p()).normalize_or_zero();
+    pub fn pdf(&self, lights: &Lights, power: &LightPower, camera: &crate::camera::importance::Sensor, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+        let w = self.dir_to(next);
         let pdf_dir = match self.kind {
             Kind::Camera => camera.pdf_dir(self.p(), w),
             Kind::Light(k) => lights.lights[k].emission_pdf_dir(self.it.ng, w),
+            Kind::Distant(_) => return power.world().disk_pdf() * next.cos_ng(w),
             Kind::Surface => {
                 let (Some(b), Some(prev)) = (&self.bsdf, prev) else { return 0.0 };
-                let wo = (prev.p() - self.p()).normalize_or_zero();
+                let wo = self.dir_to(prev);
                 b.pdf(self.frame.to_local(wo), self.frame.to_local(w))
             }
+            Kind::Escaped => return 0.0,
         };
         next.convert(pdf_dir, self.p())
     }
@@ -189,26 +252,31 @@ impl Vertex {
     /// surface vertex hit.
     pub fn light(&self, lights: &Lights) -> Option<usize> {
         match self.kind {
-            Kind::Light(k) => Some(k),
+            Kind::Light(k) | Kind::Distant(k) => Some(k),
             Kind::Surface => lights.of_geometry.get(self.it.geom_id as usize).copied().flatten(),
-            Kind::Camera => None,
+            Kind::Camera | Kind::Escaped => None,
         }
     }
 
     /// The area density of this emitter point as the start of a light
-    /// subpath: the light's pick probability × its position density.
+    /// subpath: the light's pick probability × its position density (for a
+    /// light at infinity, × the density of its direction).
     pub fn pdf_light_origin(&self, lights: &Lights, power: &LightPower) -> f32 {
-        match self.light(lights) {
-            Some(k) => power.pmf(k) * lights.lights[k].emission_pdf_pos(),
-            None => 0.0,
+        match (self.kind, self.light(lights)) {
+            (Kind::Distant(k), _) => power.pmf(k) * lights.lights[k].infinite_pdf_dir(self.it.ns),
+            (_, Some(k)) => power.pmf(k) * lights.lights[k].emission_pdf_pos(power.world()),
+            (_, None) => 0.0,
         }
     }
 
     /// The area density of `next` as the second vertex of a light subpath
     /// leaving this emitter point.
-    pub fn pdf_light(&self, lights: &Lights, next: &Vertex) -> f32 {
+    pub fn pdf_light(&self, lights: &Lights, power: &LightPower, next: &Vertex) -> f32 {
         let Some(k) = self.light(lights) else { return 0.0 };
-        let w = (next.p() - self.p()).normalize_or_zero();
+        let w = self.dir_to(next);
+        if let Kind::Distant(_) = self.kind {
+            return power.world().disk_pdf() * next.cos_ng(w);
+        }
         next.convert(lights.lights[k].emission_pdf_dir(self.it.ng, w), self.p())
     }
 
