@@ -89,13 +89,13 @@ TIERS = {
         radiance("bunny_unlit.dae", 3, BOTH, label="environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_studio"),
         radiance("bunny_microfacet_cu_unlit.dae", 3, BOTH, label="microfacet Cu under courtyard.exr", scene_flags=["-e", envmap("courtyard.exr")], tag="_env_courtyard"),
         radiance(CB, 5, BOTH, label="thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens"),
-        # Bidirectional path tracing (`--only _bdpt` runs these alone). No environment-lit
-        # case: BDPT refuses lights at infinity (docs/design/bdpt.md).
+        # Bidirectional path tracing (`--only _bdpt` runs these alone).
         radiance("CBspheres.dae", 5, BOTH, BDPT, label="BDPT: mirror and glass", tag="_bdpt"),
         radiance("CBspheres.dae", 8, BOTH, BDPT, label="BDPT: mirror and glass, -m 8", tag="_bdpt"),
         radiance("CBgems.dae", 5, BOTH, BDPT, label="BDPT: tinted glass gems", tag="_bdpt"),
         radiance("CBbunny.dae", 5, BOTH, BDPT, label="BDPT: diffuse bunny", tag="_bdpt"),
         radiance(CB, 5, BOTH, BDPT, label="BDPT: thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens_bdpt"),
+        radiance("bunny_unlit.dae", 3, BOTH, BDPT, label="BDPT: environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_bdpt"),
         radiance(CB, 5, BOTH, ["--integrator", "light"], label="light tracing (diffuse: it cannot see mirrors and glass)", tag="_light_bdpt"),
         geometry(CB),
         geometry("CBbunny.dae"),
