@@ -221,8 +221,8 @@ pub struct RenderArgs {
     /// mixture with the cosine lobe, weighted by its pdf: unbiased), so that
     /// caustics through them are found more often; 0 for the cosine lobe
     /// alone (CS184's, Cycles' and Mitsuba's way). Up to 16 objects
-    /// (`light::specular_guide`)
-    #[arg(help_heading = "Light transport", long, value_name = "FRACTION", default_value_t = crate::light::specular_guide::DEFAULT_FRACTION)]
+    /// (`render::path::specular_guide`)
+    #[arg(help_heading = "Light transport", long, value_name = "FRACTION", default_value_t = crate::render::path::specular_guide::DEFAULT_FRACTION)]
     pub specular_guide: f32,
     /// With several lights: each light sample picks one, in proportion to
     /// an estimate of what each sends to the vertex (`light::pick`), or

@@ -34,7 +34,6 @@ pub mod lune;
 pub mod pick;
 pub mod sphere_cone;
 pub mod spherical_rect;
-pub mod specular_guide;
 pub mod spherical_triangle;
 
 use spherical_rect::RectEmitter;
@@ -43,6 +42,7 @@ use spherical_triangle::SphericalTriangle;
 pub use environment::EnvMap;
 
 use crate::error::Result;
+use crate::render::path::specular_guide;
 use crate::sampling::{magnitude, offset_ray_origin, uniform_hemisphere, uniform_sphere, uniform_triangle, UNIFORM_HEMISPHERE_PDF};
 use crate::scene::{Interaction, LightKind, Scene, Shape};
 use glam::{Vec3, Vec4Swizzles};

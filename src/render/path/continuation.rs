@@ -4,7 +4,7 @@
 
 use super::{Continuation, PathTracer, Vertex};
 use crate::bsdf::{Bsdf, BsdfSample};
-use crate::light::specular_guide::GuideAt;
+use crate::render::path::specular_guide::GuideAt;
 use crate::sampler::{dim, Sampler};
 use crate::sampling::{cosine_hemisphere, cosine_hemisphere_pdf};
 use glam::Vec3;
@@ -78,7 +78,7 @@ impl<'a> PathTracer<'a> {
     }
 
     /// The guide's cones from diffuse vertex `v` at `bounce`
-    /// (`light::specular_guide`), where its continuation is drawn from the
+    /// (`render::path::specular_guide`), where its continuation is drawn from the
     /// guided mixture: not at the path's last vertex, not with `-H`, and
     /// only with a target in view.
     /// Made in `slot`, which the caller keeps from vertex to vertex

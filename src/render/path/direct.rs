@@ -8,7 +8,7 @@ use super::continuation::guided_pdf;
 use super::{PathTracer, Vertex};
 use crate::accel::Hit;
 use crate::bsdf::Bsdf;
-use crate::light::specular_guide::GuideAt;
+use crate::render::path::specular_guide::GuideAt;
 use crate::light::{emitted, lune, pick, EnvAt, Light, LightSample, Target};
 use crate::ray::Ray;
 use crate::sampler::{dim, Sampler};

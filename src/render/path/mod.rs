@@ -25,18 +25,23 @@
 //!
 //! The pieces, one a file: `direct` (a vertex's direct light, drawn as
 //! terms and replayed), `continuation` (the BSDF sample that continues the
-//! path, guided at diffuse vertices, and Russian roulette), `wavefront`
-//! (the same loop over a batch of paths, bounce by bounce); this file holds
+//! path, guided at diffuse vertices, and Russian roulette),
+//! `specular_guide` (the guide's cones toward mirror, glass and metal
+//! objects: built once per scene and kept with the scene's lights,
+//! `Lights::guide`, which hold what sampling needs of the scene),
+//! `wavefront` (the same loop over a batch of paths, bounce by bounce);
+//! this file holds
 //! the vertex, the MIS weights of BSDF samples and the path-at-a-time loop.
 
 mod continuation;
 mod direct;
+pub mod specular_guide;
 mod wavefront;
 
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
 use crate::bsdf::Bsdf;
-use crate::light::specular_guide::GuideAt;
+use specular_guide::GuideAt;
 use crate::light::{emitted, EnvAt, Lights};
 use crate::ray::Ray;
 use crate::sampler::Sampler;

@@ -39,7 +39,7 @@
 //! Scenes with more than `MAX_TARGETS` targets get no guide (the pdf sums
 //! over them at every diffuse vertex), with a note.
 
-use super::sphere_cone::{ConeBound, SphereCone};
+use crate::light::sphere_cone::{ConeBound, SphereCone};
 use crate::scene::{material, Scene, Shape};
 use glam::Vec3;
 
