@@ -312,19 +312,6 @@ fn light_desc(kind: LightKind, radiance: f32, transform: glam::Mat4) -> LightDes
     LightDesc { name: format!("{kind:?}"), kind, radiance: Vec3::splat(radiance), transform }
 }
 
-/// A sky map: a bright small sun, a gradient above the horizon, dark ground.
-fn sun_sky() -> Arc<EnvMap> {
-    let (w, h) = (64usize, 32usize);
-    let mut t = Vec::with_capacity(w * h);
-    for j in 0..h {
-        for i in 0..w {
-            let sky = if j < h / 2 { Vec3::new(0.3, 0.5, 0.9) * (1.0 - j as f32 / h as f32) } else { Vec3::new(0.05, 0.04, 0.03) };
-            let sun = if (i, j) == (40, 9) || (i, j) == (41, 9) { Vec3::new(60.0, 57.0, 45.0) } else { Vec3::ZERO };
-            t.push(sky + sun);
-        }
-    }
-    Arc::new(EnvMap::from_texels("sun sky".into(), w, h, t))
-}
 
 #[test]
 fn lights_at_infinity_agree_with_the_path_tracer() {
@@ -334,8 +321,8 @@ fn lights_at_infinity_agree_with_the_path_tracer() {
     let cases: [(&str, Vec<LightDesc>, Option<Arc<EnvMap>>); 4] = [
         ("hemisphere", vec![light_desc(LightKind::Ambient, 1.0, glam::Mat4::IDENTITY)], None),
         ("directional", vec![light_desc(LightKind::Directional, 3.0, sun)], None),
-        ("environment map", vec![], Some(sun_sky())),
-        ("all three", vec![light_desc(LightKind::Ambient, 0.5, glam::Mat4::IDENTITY), light_desc(LightKind::Directional, 2.0, sun)], Some(sun_sky())),
+        ("environment map", vec![], Some(common::sun_sky(Vec3::new(60.0, 57.0, 45.0)))),
+        ("all three", vec![light_desc(LightKind::Ambient, 0.5, glam::Mat4::IDENTITY), light_desc(LightKind::Directional, 2.0, sun)], Some(common::sun_sky(Vec3::new(60.0, 57.0, 45.0)))),
     ];
     for (what, lights, env) in cases {
         let (scene, cam) = yard(lights);

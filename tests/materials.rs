@@ -156,16 +156,7 @@ fn total_internal_reflection_traps_light_in_a_glass_slab() {
 
 /// A map with a small bright "sun", a sky gradient and a dark ground.
 fn test_sky() -> Arc<EnvMap> {
-    let (w, h) = (64usize, 32usize);
-    let mut t = Vec::with_capacity(w * h);
-    for j in 0..h {
-        for i in 0..w {
-            let sky = if j < h / 2 { Vec3::new(0.3, 0.5, 0.9) * (1.0 - j as f32 / h as f32) } else { Vec3::new(0.05, 0.04, 0.03) };
-            let sun = if (i, j) == (40, 9) || (i, j) == (41, 9) { Vec3::new(400.0, 380.0, 300.0) } else { Vec3::ZERO };
-            t.push(sky + sun);
-        }
-    }
-    Arc::new(EnvMap::from_texels("test sky".into(), w, h, t))
+    common::sun_sky(Vec3::new(400.0, 380.0, 300.0))
 }
 
 #[test]

@@ -233,3 +233,18 @@ impl Drop for Scratch {
         }
     }
 }
+
+/// A 64×32 sky map: a gradient above the horizon, a dark ground, and a
+/// small "sun" of two texels of radiance `sun`.
+pub fn sun_sky(sun: Vec3) -> std::sync::Arc<pathtracer::light::environment::EnvMap> {
+    let (w, h) = (64usize, 32usize);
+    let mut t = Vec::with_capacity(w * h);
+    for j in 0..h {
+        for i in 0..w {
+            let sky = if j < h / 2 { Vec3::new(0.3, 0.5, 0.9) * (1.0 - j as f32 / h as f32) } else { Vec3::new(0.05, 0.04, 0.03) };
+            let disc = if (i, j) == (40, 9) || (i, j) == (41, 9) { sun } else { Vec3::ZERO };
+            t.push(sky + disc);
+        }
+    }
+    std::sync::Arc::new(pathtracer::light::environment::EnvMap::from_texels("sun sky".into(), w, h, t))
+}

@@ -83,31 +83,29 @@ impl Bdpt<'_> {
             if !(ls.pdf > 0.0) {
                 return None;
             }
-            let Target::Point(target) = ls.target else {
-                // A light at infinity: a direction, the shadow ray unbounded.
-                let value = z.beta * z.f_dir(ls.wi, Mode::Radiance) * z.cos(ls.wi) * ls.value / (ls.pdf * pmf);
-                if !(value.max_element() > 0.0) {
-                    return None;
+            let beta0 = ls.value / (ls.pdf * pmf);
+            // The light point and the shadow segment to it; for a light at
+            // infinity, its direction and an unbounded shadow ray.
+            let (f, shadow, y0) = match ls.target {
+                Target::Point(target) => {
+                    let n = l.normal_at(self.scene, target, ls.prim);
+                    let origin_pdf = pmf * l.emission_pdf_pos(self.power.world());
+                    let y0 = Vertex::at_point(Kind::Light(k), target, n, target.abs().max_element(), l.geometry(), ls.prim, beta0, origin_pdf);
+                    (z.f(target, Mode::Radiance), z.it.spawn_ray_to(target), y0)
                 }
-                *rays += 1;
-                if self.accel.occluded(&z.it.spawn_ray(ls.wi)) {
-                    return None;
+                Target::Infinite => {
+                    let y0 = Vertex::distant(k, Vec3::ZERO, ls.wi, beta0, pmf * l.infinite_pdf_dir(ls.wi));
+                    (z.f_dir(ls.wi, Mode::Radiance), z.it.spawn_ray(ls.wi), y0)
                 }
-                let origin_pdf = pmf * l.infinite_pdf_dir(ls.wi);
-                let y0 = Vertex::distant(k, Vec3::ZERO, ls.wi, ls.value / (ls.pdf * pmf), origin_pdf);
-                return done(value, Some(y0), None);
             };
-            let n = l.normal_at(self.scene, target, ls.prim);
-            let value = z.beta * z.f(target, Mode::Radiance) * z.cos(ls.wi) * ls.value / (ls.pdf * pmf);
+            let value = z.beta * f * z.cos(ls.wi) * ls.value / (ls.pdf * pmf);
             if !(value.max_element() > 0.0) {
                 return None;
             }
             *rays += 1;
-            if self.accel.occluded(&z.it.spawn_ray_to(target)) {
+            if self.accel.occluded(&shadow) {
                 return None;
             }
-            let origin_pdf = pmf * l.emission_pdf_pos(self.power.world());
-            let y0 = Vertex::at_point(Kind::Light(k), target, n, target.abs().max_element(), l.geometry(), ls.prim, ls.value / (ls.pdf * pmf), origin_pdf);
             return done(value, Some(y0), None);
         }
         let y = &light[s - 1];
