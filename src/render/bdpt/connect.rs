@@ -14,16 +14,23 @@
 //!   solid angle where it can), so the point is a fresh vertex;
 //! * otherwise: both BSDFs, the adjoint one at the light end, and the
 //!   geometry term |cos|·|cos|/d² with shading normals.
+//!
+//! A connection's value assumes its segment is clear; the segment comes back
+//! as `Connection::shadow`, for the caller to trace with the sample's other
+//! connections as one batch (and only when it is worth tracing: `mod.rs`).
 
 use super::vertex::{Kind, Mode, Vertex};
 use super::Bdpt;
 use crate::light::{emitted, EnvAt, Target};
+use crate::ray::Ray;
 use crate::sampler::{dim, Sampler};
 use glam::Vec3;
 
-/// A strategy's unweighted contribution.
+/// A strategy's unweighted contribution, if `shadow` is clear.
 pub(super) struct Connection {
     pub value: Vec3,
+    /// The segment that must be unoccluded (none for s = 0).
+    pub shadow: Option<Ray>,
     /// The vertex the strategy made afresh: the light point (s = 1) or the
     /// lens point (t = 1).
     pub sampled: Option<Vertex>,
@@ -32,19 +39,19 @@ pub(super) struct Connection {
 }
 
 impl Bdpt<'_> {
-    pub(super) fn connect(&self, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, sampler: &mut Sampler, rays: &mut u64) -> Option<Connection> {
-        let done = |value: Vec3, sampled: Option<Vertex>, film: Option<(f32, f32)>| {
-            (value.max_element() > 0.0 && value.is_finite()).then_some(Connection { value, sampled, film })
+    pub(super) fn connect(&self, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, sampler: &mut Sampler) -> Option<Connection> {
+        let done = |value: Vec3, shadow: Option<Ray>, sampled: Option<Vertex>, film: Option<(f32, f32)>| {
+            (value.max_element() > 0.0 && value.is_finite()).then_some(Connection { value, shadow, sampled, film })
         };
         if s == 0 {
             let z = &camera[t - 1];
             if let Kind::Distant(k) = z.kind {
-                return done(z.beta * self.lights.lights[k].escaped(z.it.ns), None, None);
+                return done(z.beta * self.lights.lights[k].escaped(z.it.ns), None, None, None);
             }
             if z.kind != Kind::Surface || z.light(self.lights).is_none() {
                 return None;
             }
-            return done(z.beta * emitted(self.scene, &z.it, z.wo), None, None);
+            return done(z.beta * emitted(self.scene, &z.it, z.wo), None, None, None);
         }
         if t == 1 {
             let y = &light[s - 1];
@@ -61,15 +68,8 @@ impl Bdpt<'_> {
             }
             let ls = self.camera.sample_toward(y.p(), sampler.get_2d(dim::light_vertex(s as u32 - 1, dim::LENS_CONNECT)))?;
             let value = y.beta * y.f(ls.lens, Mode::Importance) * y.cos(ls.wi) * ls.weight;
-            if !(value.max_element() > 0.0) {
-                return None;
-            }
-            *rays += 1;
-            if self.accel.occluded(&y.it.spawn_ray_to(ls.lens)) {
-                return None;
-            }
             let lens = Vertex::at_point(Kind::Camera, ls.lens, self.camera.view_axis(), ls.lens.abs().max_element(), u32::MAX, 0, Vec3::ONE, 0.0);
-            return done(value, Some(lens), Some(ls.film));
+            return done(value, Some(y.it.spawn_ray_to(ls.lens)), Some(lens), Some(ls.film));
         }
         let z = &camera[t - 1];
         if !z.connectible() {
@@ -99,14 +99,7 @@ impl Bdpt<'_> {
                 }
             };
             let value = z.beta * f * z.cos(ls.wi) * ls.value / (ls.pdf * pmf);
-            if !(value.max_element() > 0.0) {
-                return None;
-            }
-            *rays += 1;
-            if self.accel.occluded(&shadow) {
-                return None;
-            }
-            return done(value, Some(y0), None);
+            return done(value, Some(shadow), Some(y0), None);
         }
         let y = &light[s - 1];
         if !y.connectible() {
@@ -123,10 +116,6 @@ impl Bdpt<'_> {
         if !(value.max_element() > 0.0) {
             return None;
         }
-        *rays += 1;
-        if self.accel.occluded(&z.it.spawn_ray_to(y.offset_toward(z.p()))) {
-            return None;
-        }
-        done(value, None, None)
+        done(value, Some(z.it.spawn_ray_to(y.offset_toward(z.p()))), None, None)
     }
 }

@@ -95,19 +95,19 @@ impl Bdpt<'_> {
         // At most -m + 2 vertices a side: on the stack for the usual depths.
         let mut cam: smallvec::SmallVec<[Densities; 16]> = camera[..t].iter().map(Densities::of).collect();
         let mut lig: smallvec::SmallVec<[Densities; 16]> = light[..s].iter().map(Densities::of).collect();
-        let pick = |i: usize, side: &[Vertex], first_sampled: bool| -> Vertex {
+        fn pick<'v>(i: usize, side: &'v [Vertex], first_sampled: bool, sampled: Option<&'v Vertex>) -> &'v Vertex {
             match (i, first_sampled, sampled) {
-                (0, true, Some(v)) => *v,
-                _ => side[i],
+                (0, true, Some(v)) => v,
+                _ => &side[i],
             }
-        };
-        let zt = pick(t - 1, camera, t == 1);
-        if t == 1 {
-            cam[0] = Densities::of(&zt);
         }
-        let ys = (s > 0).then(|| pick(s - 1, light, s == 1));
+        let zt = pick(t - 1, camera, t == 1, sampled);
+        if t == 1 {
+            cam[0] = Densities::of(zt);
+        }
+        let ys = (s > 0).then(|| pick(s - 1, light, s == 1, sampled));
         if s == 1 {
-            lig[0] = Densities::of(ys.as_ref().expect("s = 1"));
+            lig[0] = Densities::of(ys.expect("s = 1"));
         }
         // The connection's ends are not deltas for this strategy.
         cam[t - 1].delta = false;
@@ -116,29 +116,29 @@ impl Bdpt<'_> {
         }
         let (lights, power, camera_model) = (self.lights, &self.power, &self.camera);
         // z(t-1) made from the light side.
-        cam[t - 1].rev = match &ys {
-            Some(y) => y.pdf(lights, power, camera_model, (s > 1).then(|| &light[s - 2]), &zt),
+        cam[t - 1].rev = match ys {
+            Some(y) => y.pdf(lights, power, camera_model, (s > 1).then(|| &light[s - 2]), zt),
             None => zt.pdf_light_origin(lights, power),
         };
         // z(t-2) made from z(t-1).
         if t > 1 {
-            cam[t - 2].rev = match &ys {
+            cam[t - 2].rev = match ys {
                 Some(y) => zt.pdf(lights, power, camera_model, Some(y), &camera[t - 2]),
                 None => zt.pdf_light(lights, power, &camera[t - 2]),
             };
         }
-        if let Some(y) = &ys {
+        if let Some(y) = ys {
             // y(s-1) made from the camera side, and y(s-2) from y(s-1).
             lig[s - 1].rev = zt.pdf(lights, power, camera_model, (t > 1).then(|| &camera[t - 2]), y);
             if s > 1 {
-                lig[s - 2].rev = y.pdf(lights, power, camera_model, Some(&zt), &light[s - 2]);
+                lig[s - 2].rev = y.pdf(lights, power, camera_model, Some(zt), &light[s - 2]);
             }
         }
         // a_nee / a_emit for y0 of this path: the next-event density of y0
         // from y1 over its density as a light subpath's start.
         let nee_ratio = match s {
-            0 => self.nee_ratio(&zt, &camera[t - 2]),
-            1 => self.nee_ratio(ys.as_ref().expect("s = 1"), &zt),
+            0 => self.nee_ratio(zt, &camera[t - 2]),
+            1 => self.nee_ratio(ys.expect("s = 1"), zt),
             _ => light_nee_ratio,
         };
         // Every ratio below is relative to this strategy's density: with
@@ -167,7 +167,7 @@ impl Bdpt<'_> {
             } else {
                 // s' = 0: the camera path must hit the light by chance
                 // (or escape toward it, for a light at infinity).
-                let y0 = pick(0, light, s == 1);
+                let y0 = pick(0, light, s == 1, sampled);
                 match y0.kind {
                     Kind::Light(k) => !lights.lights[k].is_hittable(),
                     Kind::Distant(k) => !lights.lights[k].is_visible(),

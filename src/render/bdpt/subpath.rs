@@ -37,7 +37,7 @@ const RR_WEIGHT_FLOOR: f32 = 0.25;
 impl Bdpt<'_> {
     /// The camera subpath of camera ray `ray` (whose closest hit is `hit`):
     /// at most `max` vertices, the lens point first.
-    pub(super) fn camera_subpath(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, path: &mut Vec<Vertex>, max: usize, rays: &mut u64) {
+    pub(super) fn camera_subpath(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
         path.clear();
         let dir = ray.dir.normalize();
         let axis = self.camera.view_axis();
@@ -52,7 +52,7 @@ impl Bdpt<'_> {
 
     /// The light subpath of this pixel sample: at most `max` vertices, the
     /// light's point first (none when no light emits).
-    pub(super) fn light_subpath(&self, sampler: &mut Sampler, path: &mut Vec<Vertex>, max: usize, rays: &mut u64) {
+    pub(super) fn light_subpath(&self, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
         path.clear();
         if max == 0 {
             return;
@@ -96,7 +96,7 @@ impl Bdpt<'_> {
     /// throughput `beta`, until `max` vertices, an escape, an absorption or
     /// Russian roulette.
     #[allow(clippy::too_many_arguments)]
-    fn walk(&self, mut ray: Ray, mut first: Option<Option<Hit>>, mut beta: Vec3, mut pdf_dir: f32, mode: Mode, sampler: &mut Sampler, path: &mut Vec<Vertex>, max: usize, rays: &mut u64) {
+    fn walk(&self, mut ray: Ray, mut first: Option<Option<Hit>>, mut beta: Vec3, mut pdf_dir: f32, mode: Mode, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
         let beta_start = beta.max_element();
         let mut radiance_scale = 1.0f32;
         loop {
