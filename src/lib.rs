@@ -43,7 +43,6 @@
 //! camera.resize_keep_fov(64, 48); // the 800x600 view, scaled
 //! let integrator = PathTracer {
 //!     scene: &scene,
-//!     accel: built.accel.as_ref(),
 //!     lights: &lights,
 //!     max_depth: 5, // -m 5
 //!     accumulate: true,
@@ -52,7 +51,7 @@
 //!     russian_roulette: true,
 //! };
 //! let settings = RenderSettings::new(64, 48, 16, 0); // 16 samples per pixel, seed 0
-//! let out = render::render(&camera, &integrator, &settings);
+//! let out = render::render(&camera, built.accel.as_ref(), &integrator, &settings);
 //! assert_eq!((out.image.width, out.image.height), (64, 48));
 //! let centre = out.image.get(32, 24);
 //! assert!(centre.x > 0.0 && centre.is_finite(), "the Cornell box is lit: {centre}");

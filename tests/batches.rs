@@ -59,16 +59,16 @@ fn batched_rendering_equals_ray_at_a_time() {
         let scene = common::load(&common::scene_path("sky", name));
         let accel = common::build(BackendKind::Native, &scene.shapes);
         let lights = Lights::from_scene(&scene).unwrap();
-        let integ = PathTracer { scene: &scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate, hemisphere, light_samples, russian_roulette };
+        let integ = PathTracer { scene: &scene, lights: &lights, max_depth: m, accumulate, hemisphere, light_samples, russian_roulette };
         let camera = Camera::from_scene(&scene);
         let mut settings = RenderSettings::new(96, 72, 8, 7);
         if adaptive {
             settings.adaptive = Some(Adaptive { batch: 4, tolerance: 0.2, pilot: false });
         }
         settings.batch_rays = true;
-        let batched = render::render(&camera, &integ, &settings);
+        let batched = render::render(&camera, accel.as_ref(), &integ, &settings);
         settings.batch_rays = false;
-        let single = render::render(&camera, &integ, &settings);
+        let single = render::render(&camera, accel.as_ref(), &integ, &settings);
         let what = format!("{name} -m {m} accumulate={accumulate} -H={hemisphere} -l {light_samples} rr={russian_roulette} adaptive={adaptive}");
         assert!(batched.image.pixels.iter().any(|p| *p != glam::Vec3::ZERO), "{what}: black image");
         let differ = batched.image.pixels.iter().zip(&single.image.pixels).filter(|(a, b)| a.to_array().map(f32::to_bits) != b.to_array().map(f32::to_bits)).count();

@@ -45,10 +45,10 @@ fn render_image_env(scene: &Scene, env: Option<Arc<EnvMap>>, cam: &Camera, backe
     let accel = common::build(backend, &scene.shapes);
     let (w, h) = (cam.screen_w, cam.screen_h);
     let integ: Box<dyn Integrator> = match est {
-        Estimator::Path => Box::new(PathTracer { scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate, hemisphere: false, light_samples: 1, russian_roulette: true }),
-        Estimator::Bdpt(t) => Box::new(Bdpt::new(scene, accel.as_ref(), &lights, cam, w, h, Region { x: 0, y: 0, w, h }, m, accumulate, t).unwrap()),
+        Estimator::Path => Box::new(PathTracer { scene, lights: &lights, max_depth: m, accumulate, hemisphere: false, light_samples: 1, russian_roulette: true }),
+        Estimator::Bdpt(t) => Box::new(Bdpt::new(scene, &lights, cam, w, h, Region { x: 0, y: 0, w, h }, m, accumulate, t).unwrap()),
     };
-    let out = render::render(cam, integ.as_ref(), &RenderSettings::new(w, h, spp, seed));
+    let out = render::render(cam, accel.as_ref(), integ.as_ref(), &RenderSettings::new(w, h, spp, seed));
     assert!(out.image.pixels.iter().all(|p| p.is_finite()), "{est:?}: a non-finite pixel");
     out.image.pixels.iter().map(|p| (p.x as f64 + p.y as f64 + p.z as f64) / 3.0).collect()
 }

@@ -214,8 +214,8 @@ fn normal_images_of_cornell_boxes_are_identical_but_for_ties() {
         let mut camera = Camera::from_scene(&scene);
         camera.set_screen_size(320, 240);
         let settings = RenderSettings::new(320, 240, 1, 0);
-        let a = render::render(&camera, &NormalShading { scene: &scene, accel: native.as_ref() }, &settings).image;
-        let b = render::render(&camera, &NormalShading { scene: &scene, accel: embree.as_ref() }, &settings).image;
+        let a = render::render(&camera, native.as_ref(), &NormalShading { scene: &scene }, &settings).image;
+        let b = render::render(&camera, embree.as_ref(), &NormalShading { scene: &scene }, &settings).image;
         let (mut ties, mut last_bits, mut png_bytes) = (0, 0, 0);
         for y in 0..240u32 {
             for x in 0..320u32 {

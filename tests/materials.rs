@@ -38,8 +38,8 @@ fn render_env(scene: &Scene, cam: &Camera, env: Arc<EnvMap>, backend: BackendKin
 fn render_env_sampled(scene: &Scene, cam: &Camera, env: Arc<EnvMap>, backend: BackendKind, m: u32, hemisphere: bool, rr: bool, spp: u32, seed: u64, product: bool) -> RenderOutput {
     let accel = common::build(backend, &scene.shapes);
     let lights = Lights::with_environment(scene, Some(env)).unwrap().with_env_sampling(product, product);
-    let integ = PathTracer { scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate: true, hemisphere, light_samples: 1, russian_roulette: rr };
-    render::render(cam, &integ, &RenderSettings::new(cam.screen_w, cam.screen_h, spp, seed))
+    let integ = PathTracer { scene, lights: &lights, max_depth: m, accumulate: true, hemisphere, light_samples: 1, russian_roulette: rr };
+    render::render(cam, accel.as_ref(), &integ, &RenderSettings::new(cam.screen_w, cam.screen_h, spp, seed))
 }
 
 /// `common::camera_at` with the frame size set too.
@@ -215,8 +215,8 @@ fn mirror_at_one_bounce_shows_the_light_it_reflects() {
     let accel = common::build(BackendKind::Native, &scene.shapes);
     let lights = Lights::from_scene(&scene).unwrap();
     let run = |m: u32| {
-        let integ = PathTracer { scene: &scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
-        render::render(&cam, &integ, &RenderSettings::new(200, 150, 16, 1))
+        let integ = PathTracer { scene: &scene, lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+        render::render(&cam, accel.as_ref(), &integ, &RenderSettings::new(200, 150, 16, 1))
     };
     let (m0, m1) = (run(0), run(1));
     // Pixels whose pixel-centre ray hits the mirror sphere, black at -m 0,
@@ -246,8 +246,8 @@ fn guided_render(name: &str, env: Option<Arc<EnvMap>>, m: u32, fraction: f32, sp
     cam.resize_keep_fov(48, 36);
     let accel = common::build(BackendKind::Native, &scene.shapes);
     let lights = Lights::with_environment(&scene, env).unwrap().with_specular_guide(&scene, fraction);
-    let integ = PathTracer { scene: &scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
-    render::render(&cam, &integ, &RenderSettings::new(48, 36, spp, 3))
+    let integ = PathTracer { scene: &scene, lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+    render::render(&cam, accel.as_ref(), &integ, &RenderSettings::new(48, 36, spp, 3))
 }
 
 /// z of the difference of two renders' means (one channel: the three share
@@ -313,8 +313,8 @@ fn picked_render(name: &str, extra: &[LightDesc], area: bool, pick: bool, spp: u
     let accel = common::build(BackendKind::Native, &scene.shapes);
     let lights = Lights::from_scene(&scene).unwrap().with_sampling(area, false).with_light_pick(&scene, pick);
     assert_eq!(lights.pick.is_some(), pick, "{name}: light picking should apply");
-    let integ = PathTracer { scene: &scene, accel: accel.as_ref(), lights: &lights, max_depth: 5, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
-    render::render(&cam, &integ, &RenderSettings::new(48, 36, spp, 5))
+    let integ = PathTracer { scene: &scene, lights: &lights, max_depth: 5, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+    render::render(&cam, accel.as_ref(), &integ, &RenderSettings::new(48, 36, spp, 5))
 }
 
 #[test]

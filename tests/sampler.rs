@@ -21,10 +21,10 @@ fn render_builtin_var(kind: SamplerKind, w: u32, h: u32, spp: u32, m: u32, seed:
     camera.resize_keep_fov(w, h);
     let accel = common::build(BackendKind::Native, &scene.shapes);
     let lights = Lights::from_scene(&scene).unwrap();
-    let integ = PathTracer { scene: &scene, accel: accel.as_ref(), lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+    let integ = PathTracer { scene: &scene, lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
     let mut settings = RenderSettings::new(w, h, spp, seed);
     settings.sampler = kind;
-    let out = render::render(&camera, &integ, &settings);
+    let out = render::render(&camera, accel.as_ref(), &integ, &settings);
     let lum = |p: &glam::Vec3| (p.x as f64 + p.y as f64 + p.z as f64) / 3.0;
     (out.image.pixels.iter().map(lum).collect(), out.variance.pixels.iter().map(|v| lum(v) / 3.0 * spp as f64).collect())
 }

@@ -318,7 +318,6 @@ fn path_render_rows(name: &str, backends: &[BackendKind], threads: usize) -> Res
         let built = accel::build_with(kind, &scene.shapes, &accel::BuildOptions { threads, native: accel::NativeOptions::from_env()? })?;
         let integ = PathTracer {
             scene: &scene,
-            accel: built.accel.as_ref(),
             lights: &lights,
             max_depth: 5,
             accumulate: true,
@@ -329,7 +328,7 @@ fn path_render_rows(name: &str, backends: &[BackendKind], threads: usize) -> Res
         for batch in [true, false] {
             let mut settings = RenderSettings::new(480, 360, 64, 1);
             settings.batch_rays = batch;
-            let out = render::render(&cam, &integ, &settings);
+            let out = render::render(&cam, built.accel.as_ref(), &integ, &settings);
             let same = match &first {
                 None => {
                     first = Some(out.image.pixels.clone());
@@ -540,9 +539,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 let built = accel::build(kind, &scene.shapes, all)?;
                 let mut cam = camera.clone();
                 cam.set_screen_size(480, 360);
-                let integ = NormalShading { scene: &scene, accel: built.accel.as_ref() };
+                let integ = NormalShading { scene: &scene };
                 let settings = RenderSettings::new(480, 360, 1, 0);
-                let out = render::render(&cam, &integ, &settings);
+                let out = render::render(&cam, built.accel.as_ref(), &integ, &settings);
                 times.push(out.seconds);
             }
             let (seed_bvh, seed_brute) = seed_timing(&scene.name);

@@ -268,12 +268,11 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let options = accel::BuildOptions { threads, native };
     let built = accel::build_with(a.backend, &scene.shapes, &options)?;
     let integrator: Box<dyn Integrator> = match a.integrator {
-        IntegratorKind::Normals => Box::new(NormalShading { scene: &scene, accel: built.accel.as_ref() }),
-        IntegratorKind::Depth => Box::new(aov::Depth { accel: built.accel.as_ref() }),
-        IntegratorKind::ObjectId => Box::new(aov::ObjectId { accel: built.accel.as_ref() }),
+        IntegratorKind::Normals => Box::new(NormalShading { scene: &scene }),
+        IntegratorKind::Depth => Box::new(aov::Depth),
+        IntegratorKind::ObjectId => Box::new(aov::ObjectId),
         IntegratorKind::Path => Box::new(PathTracer {
             scene: &scene,
-            accel: built.accel.as_ref(),
             lights: &lights,
             max_depth,
             accumulate,
@@ -288,7 +287,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
                 (None, _) => Technique::Bidirectional,
             };
             let region = region.unwrap_or(Region { x: 0, y: 0, w: width, h: height });
-            Box::new(Bdpt::new(&scene, built.accel.as_ref(), &lights, &camera, width, height, region, max_depth, accumulate, technique)?)
+            Box::new(Bdpt::new(&scene, &lights, &camera, width, height, region, max_depth, accumulate, technique)?)
         }
     };
     let mut settings = RenderSettings::new(width, height, spp, a.seed);
@@ -305,7 +304,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         settings.keep_sums = true;
     }
     let start = Instant::now();
-    let out = render::render(&camera, integrator.as_ref(), &settings);
+    let out = render::render(&camera, built.accel.as_ref(), integrator.as_ref(), &settings);
     let render_s = start.elapsed().as_secs_f64();
     if out.bad_samples > 0 {
         println!("{}: warning: {} samples had a NaN or out-of-range value (counted as 0 or ±2^36)", scene.name, out.bad_samples);

@@ -12,16 +12,10 @@ use glam::Vec3;
 
 /// Distance from the camera to the first hit along the ray (not the planar
 /// z depth), in every channel; 0 where the ray escapes.
-pub struct Depth<'a> {
-    pub accel: &'a dyn Traversal,
-}
+pub struct Depth;
 
-impl Integrator for Depth<'_> {
-    fn accel(&self) -> &dyn Traversal {
-        self.accel
-    }
-
-    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
+impl Integrator for Depth {
+    fn radiance_from(&self, _accel: &dyn Traversal, ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
         match hit {
             Some(hit) => Vec3::splat(hit.t * ray.dir.length()),
             None => Vec3::ZERO,
@@ -31,16 +25,10 @@ impl Integrator for Depth<'_> {
 
 /// The flat colour `id_colour(geometry id)` of the first object hit; black
 /// where the ray escapes.
-pub struct ObjectId<'a> {
-    pub accel: &'a dyn Traversal,
-}
+pub struct ObjectId;
 
-impl Integrator for ObjectId<'_> {
-    fn accel(&self) -> &dyn Traversal {
-        self.accel
-    }
-
-    fn radiance_from(&self, _ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
+impl Integrator for ObjectId {
+    fn radiance_from(&self, _accel: &dyn Traversal, _ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
         match hit {
             Some(hit) => id_colour(hit.geom_id),
             None => Vec3::ZERO,

@@ -28,23 +28,25 @@ pub const TILE: u32 = 32;
 /// Side of the pixel blocks a tile is sampled in (see `render`).
 const BLOCK: u32 = 4;
 
-/// Radiance along a camera ray. The image loop finds the camera rays' first
-/// hits itself, a tile of rays per call to the backend's coherent batch
-/// traversal, and hands each hit over: `rays` counts every ray the estimate
-/// traces *after* the camera ray.
+/// Radiance along a camera ray. The image loop owns the traversal (`render`
+/// takes it): it finds the camera rays' first hits itself, a tile of rays
+/// per call to the backend's coherent batch traversal, and hands each hit
+/// over with the traversal to trace the rest; an integrator holds the scene
+/// and its estimator's settings, not a backend. `rays` counts every ray the
+/// estimate traces *after* the camera ray.
 pub trait Integrator: Sync {
-    /// The traversal camera rays are traced with.
-    fn accel(&self) -> &dyn Traversal;
-
-    /// Radiance along `ray`, whose closest hit in `(tmin, tmax]` is `hit`.
-    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3;
+    /// Radiance along `ray`, whose closest hit in `(tmin, tmax]` is `hit`;
+    /// further rays are traced with `accel`, the traversal the image loop
+    /// found the hit with.
+    fn radiance_from(&self, accel: &dyn Traversal, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3;
 
     /// `out[i]` = `radiance_from(&rays[i], hits[i], samplers[i], ..)` for a batch
     /// of camera rays; integrators that trace further rays may batch them
     /// (the path tracer does, bounce by bounce), with identical results.
-    fn radiance_batch(&self, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
+    #[allow(clippy::too_many_arguments)]
+    fn radiance_batch(&self, accel: &dyn Traversal, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
         for i in 0..rays.len() {
-            out[i] = self.radiance_from(&rays[i], hits[i], samplers[i], ray_count);
+            out[i] = self.radiance_from(accel, &rays[i], hits[i], samplers[i], ray_count);
         }
     }
 
@@ -57,9 +59,10 @@ pub trait Integrator: Sync {
 
     /// `radiance_from`, pushing the light that lands elsewhere on the film
     /// to `splats`.
-    fn radiance_splat(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
+    #[allow(clippy::too_many_arguments)]
+    fn radiance_splat(&self, accel: &dyn Traversal, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
         let _ = splats;
-        self.radiance_from(ray, hit, sampler, rays)
+        self.radiance_from(accel, ray, hit, sampler, rays)
     }
 }
 
@@ -247,10 +250,10 @@ impl PixelState {
 /// coherent batch. Each sample draws from its own stream (jitter, then the
 /// path), so the image does not depend on batching, tiling, threads or how
 /// the samples are split between processes.
-fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: &mut [PixelState], rule: Option<Adaptive>, rays: &mut u64, splats: &mut Vec<Splat>) {
+#[allow(clippy::too_many_arguments)]
+fn sample_tile(camera: &Camera, accel: &dyn Traversal, integ: &dyn Integrator, s: &RenderSettings, px: &mut [PixelState], rule: Option<Adaptive>, rays: &mut u64, splats: &mut Vec<Splat>) {
     let splatting = integ.splats();
     let (w, h) = (s.width as f32, s.height as f32);
-    let accel = integ.accel();
     let mut active: Vec<usize> = (0..px.len()).filter(|&i| !px[i].done).collect();
     let mut batch: Vec<Ray> = Vec::with_capacity(active.len());
     let mut hits: Vec<Option<Hit>> = Vec::with_capacity(active.len());
@@ -282,7 +285,7 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
         if splatting {
             for (k, &i) in active.iter().enumerate() {
                 let p = &mut px[i];
-                let l = integ.radiance_splat(&batch[k], hits[k], &mut p.sampler, rays, splats);
+                let l = integ.radiance_splat(accel, &batch[k], hits[k], &mut p.sampler, rays, splats);
                 p.add(l, rule);
             }
         } else if s.batch_rays {
@@ -291,14 +294,14 @@ fn sample_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, px: 
             debug_assert_eq!(samplers.len(), active.len());
             radiance.clear();
             radiance.resize(batch.len(), Vec3::ZERO);
-            integ.radiance_batch(&batch, &hits, &mut samplers, &mut radiance, rays);
+            integ.radiance_batch(accel, &batch, &hits, &mut samplers, &mut radiance, rays);
             for (k, &i) in active.iter().enumerate() {
                 px[i].add(radiance[k], rule);
             }
         } else {
             for (k, &i) in active.iter().enumerate() {
                 let p = &mut px[i];
-                let l = integ.radiance_from(&batch[k], hits[k], &mut p.sampler, rays);
+                let l = integ.radiance_from(accel, &batch[k], hits[k], &mut p.sampler, rays);
                 p.add(l, rule);
             }
         }
@@ -311,7 +314,7 @@ const PILOT_TAG: u64 = 0x7069_6c6f_7420_5f5f;
 
 /// The pixels `(x, y)` of one tile, in frame coordinates: their sums, the
 /// number of out-of-range samples, the rays traced and the splats made.
-fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixels: &[(u32, u32)]) -> (Vec<PixelSums>, u64, u64, Vec<Splat>) {
+fn render_tile(camera: &Camera, accel: &dyn Traversal, integ: &dyn Integrator, s: &RenderSettings, pixels: &[(u32, u32)]) -> (Vec<PixelSums>, u64, u64, Vec<Splat>) {
     let mut rays = 0u64;
     let mut splats = Vec::new();
     let (lo, hi) = match s.share {
@@ -324,15 +327,15 @@ fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixe
             // samples, throw them away, average fresh ones. The stopping
             // decision is then independent of the samples averaged: unbiased.
             let mut pilot: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.sampler, s.seed ^ PILOT_TAG, s.spp, 0, s.spp)).collect();
-            sample_tile(camera, integ, s, &mut pilot, Some(a), &mut rays, &mut Vec::new());
+            sample_tile(camera, accel, integ, s, &mut pilot, Some(a), &mut rays, &mut Vec::new());
             let mut px: Vec<PixelState> =
                 pixels.iter().zip(&pilot).map(|(&(x, y), p)| PixelState::new(x, y, s.sampler, s.seed, s.spp, 0, p.sums.n)).collect();
-            sample_tile(camera, integ, s, &mut px, None, &mut rays, &mut splats);
+            sample_tile(camera, accel, integ, s, &mut px, None, &mut rays, &mut splats);
             px
         }
         rule => {
             let mut px: Vec<PixelState> = pixels.iter().map(|&(x, y)| PixelState::new(x, y, s.sampler, s.seed, s.spp, lo, hi - lo)).collect();
-            sample_tile(camera, integ, s, &mut px, rule, &mut rays, &mut splats);
+            sample_tile(camera, accel, integ, s, &mut px, rule, &mut rays, &mut splats);
             px
         }
     };
@@ -340,9 +343,9 @@ fn render_tile(camera: &Camera, integ: &dyn Integrator, s: &RenderSettings, pixe
     (px.into_iter().map(|p| p.sums).collect(), bad, rays, splats)
 }
 
-/// Render `settings.region` (or the whole frame) with `integ`: all of it, or
-/// the share `settings.share` names.
-pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings) -> RenderOutput {
+/// Render `settings.region` (or the whole frame) with `integ`, tracing with
+/// `accel`: all of it, or the share `settings.share` names.
+pub fn render(camera: &Camera, accel: &dyn Traversal, integ: &dyn Integrator, settings: &RenderSettings) -> RenderOutput {
     let start = Instant::now();
     let region = settings.region();
     let (cols, rows) = tile_grid(region);
@@ -376,7 +379,7 @@ pub fn render(camera: &Camera, integ: &dyn Integrator, settings: &RenderSettings
                     }
                 }
             }
-            let (sums, bad, rays, splats) = render_tile(camera, integ, settings, &frame);
+            let (sums, bad, rays, splats) = render_tile(camera, accel, integ, settings, &frame);
             bar.inc(1);
             (local, sums, bad, rays, splats)
         })

@@ -9,15 +9,10 @@ use glam::Vec3;
 
 pub struct NormalShading<'a> {
     pub scene: &'a Scene,
-    pub accel: &'a dyn Traversal,
 }
 
 impl Integrator for NormalShading<'_> {
-    fn accel(&self) -> &dyn Traversal {
-        self.accel
-    }
-
-    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
+    fn radiance_from(&self, _accel: &dyn Traversal, ray: &Ray, hit: Option<Hit>, _sampler: &mut Sampler, _rays: &mut u64) -> Vec3 {
         match hit {
             Some(hit) => Interaction::new(self.scene, ray, &hit).ns * 0.5 + Vec3::splat(0.5),
             None => Vec3::ZERO,

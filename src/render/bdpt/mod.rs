@@ -78,7 +78,6 @@ pub enum Technique {
 
 pub struct Bdpt<'a> {
     scene: &'a Scene,
-    accel: &'a dyn Traversal,
     lights: &'a Lights,
     camera: Sensor,
     max_depth: u32,
@@ -101,7 +100,6 @@ impl<'a> Bdpt<'a> {
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         scene: &'a Scene,
-        accel: &'a dyn Traversal,
         lights: &'a Lights,
         camera: &'a Camera,
         width: u32,
@@ -114,7 +112,7 @@ impl<'a> Bdpt<'a> {
         let power = LightPower::new(&lights.lights, World::of(scene));
         let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
         let sky = (0..lights.lights.len()).filter(|&k| lights.lights[k].is_at_infinity() && lights.lights[k].is_visible()).collect();
-        Ok(Bdpt { scene, accel, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky })
+        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky })
     }
 
     /// Whether strategy (s, t) is summed.
@@ -142,20 +140,16 @@ impl<'a> Bdpt<'a> {
 }
 
 impl Integrator for Bdpt<'_> {
-    fn accel(&self) -> &dyn Traversal {
-        self.accel
-    }
-
     fn splats(&self) -> bool {
         true
     }
 
-    fn radiance_from(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
+    fn radiance_from(&self, accel: &dyn Traversal, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
         // Without a film for splats, only the camera strategies count.
-        self.radiance_splat(ray, hit, sampler, rays, &mut Vec::new())
+        self.radiance_splat(accel, ray, hit, sampler, rays, &mut Vec::new())
     }
 
-    fn radiance_splat(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
+    fn radiance_splat(&self, accel: &dyn Traversal, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
         let m = self.max_depth as usize;
         let camera_vertices = match self.technique {
             // The camera ray's own end, for the lights at infinity it sees.
@@ -165,8 +159,8 @@ impl Integrator for Bdpt<'_> {
         // On the stack for the usual depths (`-m` up to 6).
         let mut camera: Path = Path::new();
         let mut light: Path = Path::new();
-        self.camera_subpath(ray, hit, sampler, &mut camera, camera_vertices, rays);
-        self.light_subpath(sampler, &mut light, m + 1, rays);
+        self.camera_subpath(accel, ray, hit, sampler, &mut camera, camera_vertices, rays);
+        self.light_subpath(accel, sampler, &mut light, m + 1, rays);
         let light_nee_ratio = if light.len() >= 2 && self.weighted() { self.nee_ratio(&light[0], &light[1]) } else { 1.0 };
         let mut found: SmallVec<[Found; 32]> = SmallVec::new();
         for t in 1..=camera.len() {
@@ -194,7 +188,7 @@ impl Integrator for Bdpt<'_> {
                 found.extend(self.connect(&light, &camera, s, t, sampler).map(|c| Found { c, s, t, weighted: false }));
             }
         }
-        self.gather(&mut found, &light, &camera, light_nee_ratio, rays, splats)
+        self.gather(accel, &mut found, &light, &camera, light_nee_ratio, rays, splats)
     }
 }
 
@@ -224,7 +218,8 @@ impl Bdpt<'_> {
     /// of their sample's total cut the shadow rays by 8 % or 19 % on CBgems
     /// and raised the error per sample by 4 % or 12 %, for no time
     /// measurably saved: docs/design/bdpt.md.)
-    fn gather(&self, found: &mut [Found], light: &[Vertex], camera: &[Vertex], light_nee_ratio: f64, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
+    #[allow(clippy::too_many_arguments)]
+    fn gather(&self, accel: &dyn Traversal, found: &mut [Found], light: &[Vertex], camera: &[Vertex], light_nee_ratio: f64, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
         let mut shadows: SmallVec<[Ray; 32]> = SmallVec::new();
         let mut traced: SmallVec<[usize; 32]> = SmallVec::new();
         for (i, f) in found.iter().enumerate() {
@@ -235,7 +230,7 @@ impl Bdpt<'_> {
         }
         let mut occluded: SmallVec<[bool; 32]> = smallvec::smallvec![false; shadows.len()];
         *rays += shadows.len() as u64;
-        self.accel.occluded_batch(&shadows, &mut occluded);
+        accel.occluded_batch(&shadows, &mut occluded);
         for (&i, &o) in traced.iter().zip(&occluded) {
             if o {
                 found[i].c.value = Vec3::ZERO;

@@ -25,7 +25,7 @@
 
 use super::vertex::{Kind, Mode, Vertex};
 use super::Bdpt;
-use crate::accel::Hit;
+use crate::accel::{Hit, Traversal};
 use crate::ray::Ray;
 use crate::sampler::{dim, Sampler};
 use crate::scene::Interaction;
@@ -37,7 +37,8 @@ const RR_WEIGHT_FLOOR: f32 = 0.25;
 impl Bdpt<'_> {
     /// The camera subpath of camera ray `ray` (whose closest hit is `hit`):
     /// at most `max` vertices, the lens point first.
-    pub(super) fn camera_subpath(&self, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn camera_subpath(&self, accel: &dyn Traversal, ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
         path.clear();
         let dir = ray.dir.normalize();
         let axis = self.camera.view_axis();
@@ -47,12 +48,12 @@ impl Bdpt<'_> {
         }
         let pdf_dir = self.camera.pdf_dir(ray.origin, dir);
         let first = Ray { dir, tmin: ray.tmin * ray.dir.length(), tmax: ray.tmax * ray.dir.length(), ..*ray };
-        self.walk(first, Some(hit), Vec3::ONE, pdf_dir, Mode::Radiance, sampler, path, max, rays);
+        self.walk(accel, first, Some(hit), Vec3::ONE, pdf_dir, Mode::Radiance, sampler, path, max, rays);
     }
 
     /// The light subpath of this pixel sample: at most `max` vertices, the
     /// light's point first (none when no light emits).
-    pub(super) fn light_subpath(&self, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
+    pub(super) fn light_subpath(&self, accel: &dyn Traversal, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
         path.clear();
         if max == 0 {
             return;
@@ -72,7 +73,7 @@ impl Bdpt<'_> {
                 return;
             }
             let ray = Ray::new(e.p, e.dir);
-            self.walk(ray, None, beta, e.pdf_pos, Mode::Importance, sampler, path, max, rays);
+            self.walk(accel, ray, None, beta, e.pdf_pos, Mode::Importance, sampler, path, max, rays);
             return;
         }
         let origin_pdf = pmf * e.pdf_pos;
@@ -87,7 +88,7 @@ impl Bdpt<'_> {
             return;
         }
         let ray = y0.it.spawn_ray(e.dir);
-        self.walk(ray, None, beta, e.pdf_dir, Mode::Importance, sampler, path, max, rays);
+        self.walk(accel, ray, None, beta, e.pdf_dir, Mode::Importance, sampler, path, max, rays);
     }
 
     /// Extend `path` from its last vertex along `ray` (unit direction, drawn
@@ -96,7 +97,7 @@ impl Bdpt<'_> {
     /// throughput `beta`, until `max` vertices, an escape, an absorption or
     /// Russian roulette.
     #[allow(clippy::too_many_arguments)]
-    fn walk(&self, mut ray: Ray, mut first: Option<Option<Hit>>, mut beta: Vec3, mut pdf_dir: f32, mode: Mode, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
+    fn walk(&self, accel: &dyn Traversal, mut ray: Ray, mut first: Option<Option<Hit>>, mut beta: Vec3, mut pdf_dir: f32, mode: Mode, sampler: &mut Sampler, path: &mut super::Path, max: usize, rays: &mut u64) {
         let beta_start = beta.max_element();
         let mut radiance_scale = 1.0f32;
         loop {
@@ -104,7 +105,7 @@ impl Bdpt<'_> {
                 Some(h) => h,
                 None => {
                     *rays += 1;
-                    self.accel.intersect(&ray)
+                    accel.intersect(&ray)
                 }
             };
             let Some(hit) = hit else {
@@ -113,7 +114,7 @@ impl Bdpt<'_> {
                 }
                 return;
             };
-            let it = Interaction::with_barycentrics(self.scene, &ray, &hit, self.accel.exact_barycentrics());
+            let it = Interaction::with_barycentrics(self.scene, &ray, &hit, accel.exact_barycentrics());
             let prev = path.last().expect("a subpath starts with its end point");
             let mut v = Vertex::surface(self.scene, it, -ray.dir, beta);
             v.pdf_fwd = match prev.kind {

@@ -6,7 +6,7 @@
 
 use super::continuation::guided_pdf;
 use super::{PathTracer, Vertex};
-use crate::accel::Hit;
+use crate::accel::{Hit, Traversal};
 use crate::bsdf::Bsdf;
 use crate::render::path::specular_guide::GuideAt;
 use crate::light::{emitted, lune, pick, EnvAt, Light, LightSample, Target};
@@ -164,7 +164,7 @@ impl<'a> PathTracer<'a> {
     }
 
     /// The direct light of recorded `terms`, summed as `PathTracer::direct` sums.
-    pub(super) fn replay(&self, terms: &[Term], occluded: &[bool], closest: &[Ray], found: &[Option<Hit>]) -> Vec3 {
+    pub(super) fn replay(&self, accel: &dyn Traversal, terms: &[Term], occluded: &[bool], closest: &[Ray], found: &[Option<Hit>]) -> Vec3 {
         let (mut total, mut sum) = (Vec3::ZERO, Vec3::ZERO);
         for t in terms {
             match *t {
@@ -175,7 +175,7 @@ impl<'a> PathTracer<'a> {
                 }
                 Term::Hemisphere { ray, f, wi, cos } => {
                     let le = match found[ray] {
-                        Some(h) => emitted(self.scene, &Interaction::with_barycentrics(self.scene, &closest[ray], &h, self.accel.exact_barycentrics()), -wi),
+                        Some(h) => emitted(self.scene, &Interaction::with_barycentrics(self.scene, &closest[ray], &h, accel.exact_barycentrics()), -wi),
                         None => self.lights.escaped(wi),
                     };
                     sum += f * le * cos / UNIFORM_HEMISPHERE_PDF;

@@ -51,7 +51,6 @@ use glam::Vec3;
 
 pub struct PathTracer<'a> {
     pub scene: &'a Scene,
-    pub accel: &'a dyn Traversal,
     pub lights: &'a Lights,
     /// `-m`: 0 emission only, 1 direct, k paths of up to k bounces.
     pub max_depth: u32,
@@ -81,9 +80,9 @@ pub(super) struct Vertex {
 }
 
 impl PathTracer<'_> {
-    fn trace(&self, ray: &Ray, rays: &mut u64) -> Option<Interaction> {
+    fn trace(&self, accel: &dyn Traversal, ray: &Ray, rays: &mut u64) -> Option<Interaction> {
         *rays += 1;
-        self.accel.intersect(ray).map(|h| Interaction::with_barycentrics(self.scene, ray, &h, self.accel.exact_barycentrics()))
+        accel.intersect(ray).map(|h| Interaction::with_barycentrics(self.scene, ray, &h, accel.exact_barycentrics()))
     }
 
     pub(super) fn vertex(&self, it: Interaction, wo: Vec3) -> Vertex {
@@ -194,30 +193,27 @@ impl PathTracer<'_> {
     /// wavefront's terms (`direct_terms`), their rays traced one by one.
     /// Also whether the vertex's BSDF sample can still find light (see
     /// `direct_terms`).
-    fn direct(&self, v: &Vertex, bounce: u32, guide: Option<&GuideAt>, sampler: &mut Sampler, rays: &mut u64) -> (Vec3, bool) {
+    #[allow(clippy::too_many_arguments)]
+    fn direct(&self, accel: &dyn Traversal, v: &Vertex, bounce: u32, guide: Option<&GuideAt>, sampler: &mut Sampler, rays: &mut u64) -> (Vec3, bool) {
         let (mut terms, mut shadow, mut closest) = (Vec::new(), Vec::new(), Vec::new());
         let bsdf_finds_light = self.direct_terms(v, bounce, guide, sampler, &mut terms, &mut shadow, &mut closest);
         *rays += (shadow.len() + closest.len()) as u64;
-        let occluded: Vec<bool> = shadow.iter().map(|r| self.accel.occluded(r)).collect();
-        let found: Vec<Option<Hit>> = closest.iter().map(|r| self.accel.intersect(r)).collect();
-        (self.replay(&terms, &occluded, &closest, &found), bsdf_finds_light)
+        let occluded: Vec<bool> = shadow.iter().map(|r| accel.occluded(r)).collect();
+        let found: Vec<Option<Hit>> = closest.iter().map(|r| accel.intersect(r)).collect();
+        (self.replay(accel, &terms, &occluded, &closest, &found), bsdf_finds_light)
     }
 }
 
 impl Integrator for PathTracer<'_> {
-    fn accel(&self) -> &dyn Traversal {
-        self.accel
+    fn radiance_batch(&self, accel: &dyn Traversal, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
+        self.wavefront(accel, rays, hits, samplers, out, ray_count)
     }
 
-    fn radiance_batch(&self, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
-        self.wavefront(rays, hits, samplers, out, ray_count)
-    }
-
-    fn radiance_from(&self, camera_ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
+    fn radiance_from(&self, accel: &dyn Traversal, camera_ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
         let m = self.max_depth;
         let counts = |bounce: u32| self.accumulate || bounce == m;
         let wo = -camera_ray.dir.normalize();
-        let Some(it) = hit.map(|h| Interaction::with_barycentrics(self.scene, camera_ray, &h, self.accel.exact_barycentrics())) else {
+        let Some(it) = hit.map(|h| Interaction::with_barycentrics(self.scene, camera_ray, &h, accel.exact_barycentrics())) else {
             return if counts(0) { self.lights.escaped(-wo) } else { Vec3::ZERO };
         };
         let mut l = if counts(0) { emitted(self.scene, &it, wo) } else { Vec3::ZERO };
@@ -235,7 +231,7 @@ impl Integrator for PathTracer<'_> {
             let mut seeks_light = false;
             let guide = self.guide_at(&v, bounce, &mut guide_slot);
             if count {
-                let (d, finds) = self.direct(&v, bounce, guide, sampler, rays);
+                let (d, finds) = self.direct(accel, &v, bounce, guide, sampler, rays);
                 l += beta * d;
                 seeks_light = finds;
             }
@@ -245,7 +241,7 @@ impl Integrator for PathTracer<'_> {
             let last = bounce == m;
             let ray = v.it.spawn_ray(c.wi);
             let gather = count && (!self.hemisphere || c.delta);
-            let Some(next) = self.trace(&ray, rays) else {
+            let Some(next) = self.trace(accel, &ray, rays) else {
                 if gather {
                     l += c.beta * self.escaped_weighted(&c);
                 }

@@ -13,7 +13,7 @@
 
 use super::direct::Term;
 use super::{Continuation, PathTracer, Vertex};
-use crate::accel::Hit;
+use crate::accel::{Hit, Traversal};
 use crate::light::emitted;
 use crate::ray::Ray;
 use crate::sampler::Sampler;
@@ -40,7 +40,7 @@ struct Path {
 impl<'a> PathTracer<'a> {
     /// `out[i]` = the radiance along camera ray `rays[i]`, whose closest hit
     /// is `hits[i]`, drawing from `samplers[i]`.
-    pub(super) fn wavefront(&self, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
+    pub(super) fn wavefront(&self, accel: &dyn Traversal, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
         let m = self.max_depth;
         let counts = |bounce: u32| self.accumulate || bounce == m;
         // Each path is pushed empty and its first vertex made in place
@@ -50,7 +50,7 @@ impl<'a> PathTracer<'a> {
             let wo = -ray.dir.normalize();
             paths.push(Path { l: Vec3::ZERO, beta: Vec3::ONE, radiance_scale: 1.0, v: None, bounce: 1, terms: 0..0, counted: false, next: None });
             let p = paths.last_mut().expect("just pushed");
-            match hit.map(|h| Interaction::with_barycentrics(self.scene, ray, &h, self.accel.exact_barycentrics())) {
+            match hit.map(|h| Interaction::with_barycentrics(self.scene, ray, &h, accel.exact_barycentrics())) {
                 None => {
                     if counts(0) {
                         p.l = self.lights.escaped(-wo);
@@ -106,10 +106,10 @@ impl<'a> PathTracer<'a> {
             *ray_count += (shadow.len() + closest.len()) as u64;
             occluded.clear();
             occluded.resize(shadow.len(), false);
-            self.accel.occluded_coherent(&shadow, &mut occluded);
+            accel.occluded_coherent(&shadow, &mut occluded);
             found.clear();
             found.resize(closest.len(), None);
-            self.accel.intersect_batch(&closest, &mut found);
+            accel.intersect_batch(&closest, &mut found);
             // Add what the rays found, in the path-at-a-time order.
             for p in paths.iter_mut() {
                 // The vertex stays in place until its successor replaces it
@@ -117,11 +117,11 @@ impl<'a> PathTracer<'a> {
                 // memcpy).
                 let Some(v) = &p.v else { continue };
                 if p.counted {
-                    p.l += p.beta * self.replay(&terms[p.terms.clone()], &occluded, &closest, &found);
+                    p.l += p.beta * self.replay(accel, &terms[p.terms.clone()], &occluded, &closest, &found);
                 }
                 let next = p.next.and_then(|(k, c)| {
                     let gather = p.counted && (!self.hemisphere || c.delta);
-                    let Some(next) = found[k].map(|h| Interaction::with_barycentrics(self.scene, &closest[k], &h, self.accel.exact_barycentrics())) else {
+                    let Some(next) = found[k].map(|h| Interaction::with_barycentrics(self.scene, &closest[k], &h, accel.exact_barycentrics())) else {
                         if gather {
                             p.l += c.beta * self.escaped_weighted(&c);
                         }
