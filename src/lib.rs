@@ -34,16 +34,18 @@
 //! use pathtracer::accel::{self, BackendKind};
 //! use pathtracer::camera::Camera;
 //! use pathtracer::light::Lights;
-//! use pathtracer::render::{self, path::PathTracer, RenderSettings};
+//! use pathtracer::render::{self, path::{specular_guide::{self, SpecularGuide}, PathTracer}, RenderSettings};
 //!
 //! let scene = pathtracer::scene::builtin::load()?; // or scene::load_file(path)
 //! let built = accel::build(BackendKind::Native, &scene.shapes, 0)?;
 //! let lights = Lights::with_environment(&scene, None)?;
+//! let (guide, _) = SpecularGuide::of_scene(&scene, specular_guide::DEFAULT_FRACTION);
 //! let mut camera = Camera::from_scene(&scene);
 //! camera.resize_keep_fov(64, 48); // the 800x600 view, scaled
 //! let integrator = PathTracer {
 //!     scene: &scene,
 //!     lights: &lights,
+//!     guide: guide.as_ref(), // --specular-guide
 //!     max_depth: 5, // -m 5
 //!     accumulate: true,
 //!     hemisphere: false,

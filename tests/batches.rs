@@ -59,7 +59,8 @@ fn batched_rendering_equals_ray_at_a_time() {
         let scene = common::load(&common::scene_path("sky", name));
         let accel = common::build(BackendKind::Native, &scene.shapes);
         let lights = Lights::from_scene(&scene).unwrap();
-        let integ = PathTracer { scene: &scene, lights: &lights, max_depth: m, accumulate, hemisphere, light_samples, russian_roulette };
+        let guide = common::guide(&scene);
+        let integ = PathTracer { scene: &scene, lights: &lights, guide: guide.as_ref(), max_depth: m, accumulate, hemisphere, light_samples, russian_roulette };
         let camera = Camera::from_scene(&scene);
         let mut settings = RenderSettings::new(96, 72, 8, 7);
         if adaptive {

@@ -44,8 +44,9 @@ fn render_image_env(scene: &Scene, env: Option<Arc<EnvMap>>, cam: &Camera, backe
     let lights = Lights::with_environment(scene, env).unwrap();
     let accel = common::build(backend, &scene.shapes);
     let (w, h) = (cam.screen_w, cam.screen_h);
+    let guide = common::guide(scene);
     let integ: Box<dyn Integrator> = match est {
-        Estimator::Path => Box::new(PathTracer { scene, lights: &lights, max_depth: m, accumulate, hemisphere: false, light_samples: 1, russian_roulette: true }),
+        Estimator::Path => Box::new(PathTracer { scene, lights: &lights, guide: guide.as_ref(), max_depth: m, accumulate, hemisphere: false, light_samples: 1, russian_roulette: true }),
         Estimator::Bdpt(t) => Box::new(Bdpt::new(scene, &lights, cam, w, h, Region { x: 0, y: 0, w, h }, m, accumulate, t).unwrap()),
     };
     let out = render::render(cam, accel.as_ref(), integ.as_ref(), &RenderSettings::new(w, h, spp, seed));

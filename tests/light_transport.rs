@@ -277,7 +277,8 @@ fn render_stats(scene: &Scene, camera: &Camera, backend: BackendKind, m: u32, ac
 #[allow(clippy::too_many_arguments)]
 fn render_stats_with(scene: &Scene, lights: &Lights, camera: &Camera, backend: BackendKind, m: u32, accumulate: bool, hemisphere: bool, rr: bool, spp: u32, seed: u64, w: u32, h: u32) -> Stats {
     let accel = common::build(backend, &scene.shapes);
-    let integ = PathTracer { scene, lights, max_depth: m, accumulate, hemisphere, light_samples: 1, russian_roulette: rr };
+    let guide = common::guide(scene);
+    let integ = PathTracer { scene, lights, guide: guide.as_ref(), max_depth: m, accumulate, hemisphere, light_samples: 1, russian_roulette: rr };
     let settings = RenderSettings::new(w, h, spp, seed);
     let out = render::render(camera, accel.as_ref(), &integ, &settings);
     let lum = |c: Vec3| (c.x as f64 + c.y as f64 + c.z as f64) / 3.0;

@@ -11,7 +11,7 @@ use glam::{Mat3, Vec3};
 use pathtracer::accel::BackendKind;
 use pathtracer::camera::Camera;
 use pathtracer::light::{EnvMap, Lights};
-use pathtracer::render::{self, path::PathTracer, RenderOutput, RenderSettings};
+use pathtracer::render::{self, path::{specular_guide::SpecularGuide, PathTracer}, RenderOutput, RenderSettings};
 use pathtracer::scene::{Bsdf, LightDesc, LightKind, Material, Scene, Shape, TriangleMesh};
 use std::sync::Arc;
 
@@ -38,7 +38,8 @@ fn render_env(scene: &Scene, cam: &Camera, env: Arc<EnvMap>, backend: BackendKin
 fn render_env_sampled(scene: &Scene, cam: &Camera, env: Arc<EnvMap>, backend: BackendKind, m: u32, hemisphere: bool, rr: bool, spp: u32, seed: u64, product: bool) -> RenderOutput {
     let accel = common::build(backend, &scene.shapes);
     let lights = Lights::with_environment(scene, Some(env)).unwrap().with_env_sampling(product, product);
-    let integ = PathTracer { scene, lights: &lights, max_depth: m, accumulate: true, hemisphere, light_samples: 1, russian_roulette: rr };
+    let guide = common::guide(scene);
+    let integ = PathTracer { scene, lights: &lights, guide: guide.as_ref(), max_depth: m, accumulate: true, hemisphere, light_samples: 1, russian_roulette: rr };
     render::render(cam, accel.as_ref(), &integ, &RenderSettings::new(cam.screen_w, cam.screen_h, spp, seed))
 }
 
@@ -214,8 +215,9 @@ fn mirror_at_one_bounce_shows_the_light_it_reflects() {
     cam.resize_keep_fov(200, 150);
     let accel = common::build(BackendKind::Native, &scene.shapes);
     let lights = Lights::from_scene(&scene).unwrap();
+    let guide = common::guide(&scene);
     let run = |m: u32| {
-        let integ = PathTracer { scene: &scene, lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+        let integ = PathTracer { scene: &scene, lights: &lights, guide: guide.as_ref(), max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
         render::render(&cam, accel.as_ref(), &integ, &RenderSettings::new(200, 150, 16, 1))
     };
     let (m0, m1) = (run(0), run(1));
@@ -245,8 +247,9 @@ fn guided_render(name: &str, env: Option<Arc<EnvMap>>, m: u32, fraction: f32, sp
     let mut cam = Camera::from_scene(&scene);
     cam.resize_keep_fov(48, 36);
     let accel = common::build(BackendKind::Native, &scene.shapes);
-    let lights = Lights::with_environment(&scene, env).unwrap().with_specular_guide(&scene, fraction);
-    let integ = PathTracer { scene: &scene, lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+    let lights = Lights::with_environment(&scene, env).unwrap();
+    let (guide, _) = SpecularGuide::of_scene(&scene, fraction);
+    let integ = PathTracer { scene: &scene, lights: &lights, guide: guide.as_ref(), max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
     render::render(&cam, accel.as_ref(), &integ, &RenderSettings::new(48, 36, spp, 3))
 }
 
@@ -313,7 +316,8 @@ fn picked_render(name: &str, extra: &[LightDesc], area: bool, pick: bool, spp: u
     let accel = common::build(BackendKind::Native, &scene.shapes);
     let lights = Lights::from_scene(&scene).unwrap().with_sampling(area, false).with_light_pick(&scene, pick);
     assert_eq!(lights.pick.is_some(), pick, "{name}: light picking should apply");
-    let integ = PathTracer { scene: &scene, lights: &lights, max_depth: 5, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+    let guide = common::guide(&scene);
+    let integ = PathTracer { scene: &scene, lights: &lights, guide: guide.as_ref(), max_depth: 5, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
     render::render(&cam, accel.as_ref(), &integ, &RenderSettings::new(48, 36, spp, 5))
 }
 

@@ -214,7 +214,8 @@ fn a_scene_renders_the_same_image_at_any_scale_inside_the_limits() {
             let lights = Lights::from_scene(&scene).unwrap();
             let mut cam = Camera::from_scene(&scene);
             cam.set_screen_size(48, 36);
-            let integ = PathTracer { scene: &scene, lights: &lights, max_depth: 2, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: false };
+            let guide = common::guide(&scene);
+            let integ = PathTracer { scene: &scene, lights: &lights, guide: guide.as_ref(), max_depth: 2, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: false };
             let out = render::render(&cam, built.accel.as_ref(), &integ, &RenderSettings::new(48, 36, 4, 7));
             images.push((s, out.image.pixels));
         }

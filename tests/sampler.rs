@@ -21,7 +21,8 @@ fn render_builtin_var(kind: SamplerKind, w: u32, h: u32, spp: u32, m: u32, seed:
     camera.resize_keep_fov(w, h);
     let accel = common::build(BackendKind::Native, &scene.shapes);
     let lights = Lights::from_scene(&scene).unwrap();
-    let integ = PathTracer { scene: &scene, lights: &lights, max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
+    let guide = common::guide(&scene);
+    let integ = PathTracer { scene: &scene, lights: &lights, guide: guide.as_ref(), max_depth: m, accumulate: true, hemisphere: false, light_samples: 1, russian_roulette: true };
     let mut settings = RenderSettings::new(w, h, spp, seed);
     settings.sampler = kind;
     let out = render::render(&camera, accel.as_ref(), &integ, &settings);

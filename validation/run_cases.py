@@ -139,6 +139,12 @@ class Harness:
         for f in ("probe.png", "probe_rate.png"):
             if os.path.exists(os.path.join(self.out, f)):
                 os.remove(os.path.join(self.out, f))
+        if args.backends:
+            wanted = [b for b in args.backends.split(",") if b]
+            missing = [b for b in wanted if b not in self.backends]
+            if missing:
+                sys.exit(f"run_cases: --backends {args.backends}: {', '.join(missing)} not available here (available: {', '.join(self.backends)})")
+            self.backends = wanted
         self.blender = shutil.which("blender")
         self.povray_bin = shutil.which("povray")
 
@@ -507,6 +513,7 @@ def main():
     ap.add_argument("--scene", default="", help="run your own scene (.dae, .obj, .ply) instead of the tier's cases, at the tier's image size and sample counts")
     ap.add_argument("-m", dest="max_depth", type=int, default=5, help="with --scene: the maximum path depth (default 5)")
     ap.add_argument("--refs", default="mitsuba,cycles", help="with --scene: the references to compare against (mitsuba, cycles, povray; default mitsuba,cycles)")
+    ap.add_argument("--backends", default="", help="our backends to run, comma-separated (native, embree3, embree4; default: every one that loads here)")
     ap.add_argument("--scene-flags", default="", help="with --scene: flags that change the scene, passed to the export too (e.g. \"-e map.exr -b 0.1 -d 4.5\")")
     args = ap.parse_args()
     tier = dict(TIERS[args.tier])

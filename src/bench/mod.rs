@@ -10,7 +10,7 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::ray::Ray;
 use crate::light::Lights;
-use crate::render::{self, normals::NormalShading, path::PathTracer, RenderSettings};
+use crate::render::{self, normals::NormalShading, path::{specular_guide::{self, SpecularGuide}, PathTracer}, RenderSettings};
 use crate::scene::{Scene, TriangleMesh};
 use clap::Args;
 use glam::Vec3;
@@ -310,6 +310,7 @@ fn embree_modes(
 fn path_render_rows(name: &str, backends: &[BackendKind], threads: usize) -> Result<String> {
     let scene = load_bench_scene(name)?;
     let lights = Lights::from_scene(&scene)?;
+    let (guide, _) = SpecularGuide::of_scene(&scene, specular_guide::DEFAULT_FRACTION);
     let mut cam = Camera::from_scene(&scene);
     cam.set_screen_size(480, 360);
     let mut rows = String::new();
@@ -319,6 +320,7 @@ fn path_render_rows(name: &str, backends: &[BackendKind], threads: usize) -> Res
         let integ = PathTracer {
             scene: &scene,
             lights: &lights,
+            guide: guide.as_ref(),
             max_depth: 5,
             accumulate: true,
             hemisphere: false,

@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::image_io;
 use crate::light::Lights;
 use crate::render::bdpt::{Bdpt, Technique};
-use crate::render::{self, aov, normals::NormalShading, path::PathTracer, Adaptive, Integrator, Region, RenderSettings};
+use crate::render::{self, aov, normals::NormalShading, path::{specular_guide::SpecularGuide, PathTracer}, Adaptive, Integrator, Region, RenderSettings};
 use crate::scene::Bsdf;
 use crate::scene::{builtin, Scene};
 use clap::ValueEnum;
@@ -248,7 +248,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let lights = match a.integrator {
         IntegratorKind::Path | IntegratorKind::Bdpt | IntegratorKind::Light => {
             check_materials(&scene)?;
-            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_sampling(a.env_sampling != EnvSamplingArg::Map, a.env_sampling == EnvSamplingArg::Product).with_specular_guide(&scene, a.specular_guide).with_light_pick(&scene, a.light_pick == LightPickArg::One);
+            let l = Lights::with_environment(&scene, env)?.with_sampling(a.light_sampling == LightSamplingArg::Area, a.sky_sampling == SkySamplingArg::Uniform).with_env_sampling(a.env_sampling != EnvSamplingArg::Map, a.env_sampling == EnvSamplingArg::Product).with_light_pick(&scene, a.light_pick == LightPickArg::One);
             if l.lights.is_empty() {
                 // One line: the notes (a zero-radiance light dropped) go into it.
                 let why = if l.notes.is_empty() { String::new() } else { format!(" ({})", l.notes.join("; ")) };
@@ -265,6 +265,17 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     if let Some(note) = &batch_note {
         println!("{}: {note}", scene.name);
     }
+    // The path tracer's guide toward mirror, glass and metal objects.
+    let guide = match a.integrator {
+        IntegratorKind::Path => {
+            let (guide, note) = SpecularGuide::of_scene(&scene, a.specular_guide);
+            if let Some(note) = note {
+                println!("{}: {note}", scene.name);
+            }
+            guide
+        }
+        _ => None,
+    };
     let options = accel::BuildOptions { threads, native };
     let built = accel::build_with(a.backend, &scene.shapes, &options)?;
     let integrator: Box<dyn Integrator> = match a.integrator {
@@ -274,6 +285,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         IntegratorKind::Path => Box::new(PathTracer {
             scene: &scene,
             lights: &lights,
+            guide: guide.as_ref(),
             max_depth,
             accumulate,
             hemisphere: a.hemisphere,

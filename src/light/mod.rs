@@ -42,7 +42,6 @@ use spherical_triangle::SphericalTriangle;
 pub use environment::EnvMap;
 
 use crate::error::Result;
-use crate::render::path::specular_guide;
 use crate::sampling::{magnitude, offset_ray_origin, uniform_hemisphere, uniform_sphere, uniform_triangle, UNIFORM_HEMISPHERE_PDF};
 use crate::scene::{Interaction, LightKind, Scene, Shape};
 use glam::{Vec3, Vec4Swizzles};
@@ -357,9 +356,6 @@ pub struct Lights {
     /// At glossy vertices, sample the environment inside the lobe's cone
     /// (`env_lobe`) instead (with `env_product` on).
     pub env_lobes: bool,
-    /// Continuation rays of diffuse vertices partly aimed at the scene's
-    /// specular and glossy objects (`specular_guide`); `None`: cosine only.
-    pub guide: Option<specular_guide::SpecularGuide>,
     /// Each light sample picks one of the lights (`pick`: several lights,
     /// all with an estimate); `None`: every light is sampled.
     pub pick: Option<pick::Picker>,
@@ -456,7 +452,7 @@ impl Lights {
                 out.lights.push(Light::Environment(e));
             }
         }
-        Ok(out.with_specular_guide(scene, specular_guide::DEFAULT_FRACTION).with_light_pick(scene, true))
+        Ok(out.with_light_pick(scene, true))
     }
 
     /// The CS184 sampling of every light instead of ours, for A/B
@@ -489,16 +485,6 @@ impl Lights {
     /// (`--light-pick one`), or sample every light (`all`).
     pub fn with_light_pick(mut self, scene: &Scene, one: bool) -> Lights {
         self.pick = if one { pick::Picker::new(scene, &self.lights) } else { None };
-        self
-    }
-
-    /// Aim this share of diffuse vertices' continuation rays at the
-    /// scene's specular and glossy objects (`--specular-guide`; 0: none).
-    pub fn with_specular_guide(mut self, scene: &Scene, fraction: f32) -> Lights {
-        let (guide, note) = specular_guide::SpecularGuide::of_scene(scene, fraction);
-        self.guide = guide;
-        self.notes.retain(|n| !n.ends_with("(--specular-guide)"));
-        self.notes.extend(note);
         self
     }
 

@@ -4,6 +4,7 @@
 use pathtracer::accel::{self, BackendKind, Traversal};
 use glam::{Mat3, Vec3};
 use pathtracer::camera::Camera;
+use pathtracer::render::path::specular_guide::{self, SpecularGuide};
 use pathtracer::scene::{collada, Bsdf, CameraDesc, LightDesc, Material, Object, Scene, Shape, TriangleMesh};
 use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
 use std::path::{Path, PathBuf};
@@ -46,6 +47,13 @@ pub fn backends() -> Vec<BackendKind> {
     let mut v = vec![BackendKind::Native, BackendKind::Brute];
     v.extend(embree_backends());
     v
+}
+
+/// The path tracer's guide toward `scene`'s mirror, glass and metal objects
+/// at its default share (`--specular-guide`), as the command line builds it.
+#[allow(dead_code)]
+pub fn guide(scene: &Scene) -> Option<SpecularGuide> {
+    SpecularGuide::of_scene(scene, specular_guide::DEFAULT_FRACTION).0
 }
 
 pub fn build(kind: BackendKind, shapes: &[Shape]) -> Box<dyn Traversal> {

@@ -87,8 +87,8 @@ impl<'a> PathTracer<'a> {
         if !matches!(v.bsdf, Some(Bsdf::Diffuse(_))) || self.hemisphere || bounce == self.max_depth {
             return None;
         }
-        let lights: &'a crate::light::Lights = self.lights;
-        let at = lights.guide.as_ref()?.at_in(v.it.p, v.ns, slot);
+        let guide: &'a super::SpecularGuide = self.guide?;
+        let at = guide.at_in(v.it.p, v.ns, slot);
         (at.fraction() > 0.0).then_some(at)
     }
 

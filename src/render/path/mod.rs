@@ -27,8 +27,7 @@
 //! terms and replayed), `continuation` (the BSDF sample that continues the
 //! path, guided at diffuse vertices, and Russian roulette),
 //! `specular_guide` (the guide's cones toward mirror, glass and metal
-//! objects: built once per scene and kept with the scene's lights,
-//! `Lights::guide`, which hold what sampling needs of the scene),
+//! objects: built once per scene, `PathTracer::guide`),
 //! `wavefront` (the same loop over a batch of paths, bounce by bounce);
 //! this file holds
 //! the vertex, the MIS weights of BSDF samples and the path-at-a-time loop.
@@ -41,7 +40,7 @@ mod wavefront;
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
 use crate::bsdf::Bsdf;
-use specular_guide::GuideAt;
+use specular_guide::{GuideAt, SpecularGuide};
 use crate::light::{emitted, EnvAt, Lights};
 use crate::ray::Ray;
 use crate::sampler::Sampler;
@@ -52,6 +51,10 @@ use glam::Vec3;
 pub struct PathTracer<'a> {
     pub scene: &'a Scene,
     pub lights: &'a Lights,
+    /// `--specular-guide`: aims a share of diffuse vertices' continuation
+    /// rays at the scene's mirror, glass and metal objects
+    /// (`SpecularGuide::of_scene`); `None`: the cosine lobe alone.
+    pub guide: Option<&'a SpecularGuide>,
     /// `-m`: 0 emission only, 1 direct, k paths of up to k bounces.
     pub max_depth: u32,
     /// `-o`: true sums bounces 0..=m, false keeps only bounce m.
