@@ -7,12 +7,16 @@ interpolated at equal time (metrics.equal_time_ratio).
 
   validation/bdpt_vs_path.py SCENE.dae -m 5 [--size 128 96] [--ladder 4,16,64] [--seeds 6]
       [--region X Y W H] [--integrators path,bdpt] [--threads N] [--backend native]
+      [--csv FILE.csv] [--curves FILE.json] [--svg FILE.svg]
 
-Prints one table row per integrator pair; --csv appends the rows (with date, commit and CPU).
+Prints one table row per integrator pair; --csv appends the rows (with date, commit and CPU);
+--curves appends both curves of every row to a JSON list, and --svg plots every curve in that
+list (one log-log panel per scene and pixel set: relMSE against sample time).
 The region is in image pixels, (0, 0) at the top left, as the EXR rows run.
 """
 import argparse
 import datetime
+import json
 import os
 import platform
 import subprocess
@@ -25,6 +29,10 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from images import read_exr  # noqa: E402
 from metrics import equal_time_ratio, ladder_curve  # noqa: E402
+from speed_vs_error import svg  # noqa: E402
+
+# The integrators' colours in the plot.
+COLOURS = {"path": "#d62728", "bdpt": "#9467bd", "light": "#8c564b"}
 
 ROOT = os.path.dirname(HERE)
 
@@ -61,6 +69,8 @@ def main():
     ap.add_argument("--backend", default="native")
     ap.add_argument("--pathtracer", default=os.path.join(ROOT, "target", "release", "pathtracer"))
     ap.add_argument("--csv", default="")
+    ap.add_argument("--curves", default="", help="append every row's two curves to this JSON list")
+    ap.add_argument("--svg", default="", help="with --curves: plot every curve of that list here")
     a = ap.parse_args()
     ladder = [int(x) for x in a.ladder.split(",")]
     integrators = a.integrators.split(",")
@@ -84,17 +94,36 @@ def main():
     name = os.path.splitext(os.path.basename(a.scene))[0]
     base = integrators[0]
     rows = []
+    curve_rows = []
     for where, mask in masks.items():
         curves = {i: ladder_curve([(n, s, img[mask]) for n, s, img in runs[i]], ref[mask]) for i in integrators}
         for integ in integrators[1:]:
             eq = equal_time_ratio(curves[integ]["curve"], curves[base]["curve"])
             per_spp = {i: curves[i]["fit"]["seconds_per_spp"] for i in (base, integ)}
             rows.append((name, a.m, where, integ, base, eq["ratio"] if eq else float("nan"), eq["seconds"] if eq else float("nan"), per_spp[integ] / per_spp[base]))
+            curve_rows.append({"case": f"{name} -m {a.m}, {where}", "backend": integ, "curve": curves[integ]["curve"], "reference": base,
+                               "reference_curve": curves[base]["curve"], "date": str(datetime.date.today()), "cpu": cpu_name(), "threads": a.threads})
     print(f"{name} -m {a.m}, {a.size[0]}x{a.size[1]}, {a.threads} threads, {a.backend}, ladder {ladder} x {a.seeds} seeds, {cpu_name()}")
     print("| scene | -m | pixels | integrator | against | equal-time relMSE ratio | at seconds | time per sample ratio |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]} | {r[5]:.3f} | {r[6]:.3f} | {r[7]:.2f} |")
+    if a.curves:
+        # Rows of the same case replace the older ones.
+        old = []
+        if os.path.exists(a.curves):
+            with open(a.curves) as f:
+                old = json.load(f)
+        new_cases = {r["case"] for r in curve_rows}
+        kept = [r for r in old if r["case"] not in new_cases] + curve_rows
+        with open(a.curves, "w") as f:
+            json.dump(kept, f, indent=1)
+        if a.svg:
+            cases = list(dict.fromkeys(r["case"] for r in kept))
+            with open(a.svg, "w") as f:
+                f.write(svg(kept, cases, colours=COLOURS))
+    elif a.svg:
+        sys.exit("bdpt_vs_path: --svg plots the curves kept by --curves; give both")
     if a.csv:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT).stdout.strip()
         if subprocess.run(["git", "diff", "--quiet", "HEAD", "--", "src"], cwd=ROOT).returncode != 0:

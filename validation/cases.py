@@ -96,7 +96,7 @@ TIERS = {
         radiance("CBbunny.dae", 5, BOTH, BDPT, label="BDPT: diffuse bunny", tag="_bdpt"),
         radiance(CB, 5, BOTH, BDPT, label="BDPT: thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens_bdpt"),
         radiance("bunny_unlit.dae", 3, BOTH, BDPT, label="BDPT: environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_bdpt"),
-        radiance(CB, 5, BOTH, ["--integrator", "light"], label="light tracing (diffuse: it cannot see mirrors and glass)", tag="_light_bdpt"),
+        radiance(CB, 5, BOTH + ["mitsuba_ptracer"], ["--integrator", "light"], label="light tracing (diffuse: it cannot see mirrors and glass)", tag="_light_bdpt"),
         geometry(CB),
         geometry("CBbunny.dae"),
         geometry("hard_offset.dae", ref_shift="normalise"),

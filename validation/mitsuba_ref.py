@@ -22,6 +22,10 @@ other handedness (the map is flipped left-right and turned 90 degrees about +y) 
 at v = j/(H-1) (the map is resampled to 2H+1 rows that reproduce our clamped bilinear lookup);
 before rendering, Mitsuba's own lookup is compared with ours in 4096 directions, and a
 mismatch refuses the scene.
+
+`--integrator ptracer` renders with Mitsuba's particle tracer instead (the same max_depth and
+Russian roulette): the reference for our light tracer (`--integrator light`), which like it
+cannot see what the camera sees in or through mirrors and glass.
 """
 import argparse
 import json
@@ -114,7 +118,7 @@ def bsdf_of(s):
     refuse(f"shape {s['id']}: {t} (CS184's refraction transmits everything with no Fresnel term; no Mitsuba BSDF does)")
 
 
-def scene_dict(spec, folder, max_depth):
+def scene_dict(spec, folder, max_depth, integrator="path"):
     import mitsuba as mi
 
     cam = spec["camera"]
@@ -122,7 +126,7 @@ def scene_dict(spec, folder, max_depth):
     target = [o + f for o, f in zip(origin, cam["forward"])]
     d = {
         "type": "scene",
-        "integrator": {"type": "path", "max_depth": max_depth + 1, "rr_depth": 5, "hide_emitters": False},
+        "integrator": {"type": integrator, "max_depth": max_depth + 1, "rr_depth": 5, "hide_emitters": False},
         "sensor": {
             "type": "thinlens" if cam.get("lens_radius", 0) > 0 else "perspective",
             "fov": cam["fov_x_deg"],
@@ -186,6 +190,7 @@ def main():
     ap.add_argument("--renders", type=int, default=16, help="independent renders (for the variance)")
     ap.add_argument("--out", required=True, help="output prefix: <out>.exr, <out>_var.exr, <out>.json")
     ap.add_argument("--ladder", default="", help="also time single renders at these spp (comma-separated): <out>_spp<N>_k<K>.exr")
+    ap.add_argument("--integrator", choices=["path", "ptracer"], default="path", help="Mitsuba's path tracer, or its particle tracer")
     ap.add_argument("--ladder-seeds", type=int, default=1, help="independent renders per ladder rung (their spread is the rung's error, their median time its time)")
     args = ap.parse_args()
     import time
@@ -195,7 +200,7 @@ def main():
     mi.set_variant("scalar_rgb")
     with open(os.path.join(args.scene, "scene.json")) as f:
         spec = json.load(f)
-    sd = scene_dict(spec, args.scene, args.max_depth)
+    sd = scene_dict(spec, args.scene, args.max_depth, args.integrator)
     tex = sd.pop("_env_texels", None)
     scene = mi.load_dict(sd)
     if tex is not None:
@@ -215,7 +220,7 @@ def main():
         mi.Bitmap(mean.astype(np.float32)).write(args.out + ".exr")
         mi.Bitmap(var_of_mean.astype(np.float32)).write(args.out + "_var.exr")
         with open(args.out + ".json", "w") as f:
-            json.dump({"renderer": f"mitsuba {mi.__version__} scalar_rgb", "spp": args.spp * args.renders, "renders": args.renders, "seconds": seconds,
+            json.dump({"renderer": f"mitsuba {mi.__version__} scalar_rgb" + (" ptracer" if args.integrator == "ptracer" else ""), "spp": args.spp * args.renders, "renders": args.renders, "seconds": seconds,
                        "image_means": [float(i.mean()) for i in images]}, f)
         print(f"mitsuba: {args.renders} x {args.spp} spp in {seconds:.1f} s")
     # The ladder: rung by rung, seed by seed, each render timed on its own (scene

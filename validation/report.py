@@ -8,7 +8,7 @@ import numpy as np
 from cases import BATCHES
 
 
-REF_COLOURS = {"native": "#d62728", "embree": "#1f77b4", "embree3": "#1f77b4", "embree4": "#17becf", "mitsuba": "#2ca02c", "cycles": "#ff7f0e", "povray": "#9467bd"}
+REF_COLOURS = {"native": "#d62728", "embree": "#1f77b4", "embree3": "#1f77b4", "embree4": "#17becf", "mitsuba": "#2ca02c", "mitsuba_ptracer": "#98df8a", "cycles": "#ff7f0e", "povray": "#9467bd"}
 
 
 def svg_curves(series, width=360, height=240):

@@ -172,12 +172,13 @@ class Harness:
 
     # ---- references: each returns {renderer, mean, var, image_means, spp, seconds} ----
 
-    def mitsuba(self, scene_dir, key, m):
+    def mitsuba(self, scene_dir, key, m, integrator="path"):
         t = self.t
-        ref = os.path.join(self.cache, f"mitsuba_{key}_m{m}_{t['ref_spp']}x{t['ref_renders']}")
+        name = "mitsuba" if integrator == "path" else f"mitsuba_{integrator}"
+        ref = os.path.join(self.cache, f"{name}_{key}_m{m}_{t['ref_spp']}x{t['ref_renders']}")
         if not os.path.exists(ref + ".json"):
             r = subprocess.run([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), scene_dir, "--max-depth", str(m), "--spp", str(t["ref_spp"]),
-                                "--renders", str(t["ref_renders"]), "--out", ref], capture_output=True, text=True)
+                                "--renders", str(t["ref_renders"]), "--integrator", integrator, "--out", ref], capture_output=True, text=True)
             if r.returncode == 3:
                 return {"refused": r.stderr.strip()}
             if r.returncode != 0:
@@ -187,6 +188,10 @@ class Harness:
             meta = json.load(f)
         return {"renderer": meta["renderer"], "mean": mean, "var": read_exr(ref + "_var.exr"), "image_means": meta["image_means"], "spp": meta["spp"],
                 "seconds": meta["seconds"]}
+
+    def mitsuba_ptracer(self, scene_dir, key, m):
+        """Mitsuba's particle tracer: the light tracer's like (`--integrator light`)."""
+        return self.mitsuba(scene_dir, key, m, "ptracer")
 
     def cycles(self, scene_dir, key, m, mode="radiance", spp=None, renders=None):
         if not self.blender:
@@ -217,9 +222,10 @@ class Harness:
         t = self.t
         lad = ",".join(str(n) for n in t["ladder"])
         out = os.path.join(folder, f"{rname}_ladder")
-        if rname == "mitsuba":
+        if rname in ("mitsuba", "mitsuba_ptracer"):
+            integrator = "ptracer" if rname == "mitsuba_ptracer" else "path"
             sh([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), scene_dir, "--max-depth", str(m), "--spp", "1", "--renders", "0",
-                "--ladder", lad, "--ladder-seeds", str(t["ladder_seeds"]), "--out", out])
+                "--integrator", integrator, "--ladder", lad, "--ladder-seeds", str(t["ladder_seeds"]), "--out", out])
             with open(out + "_ladder.json") as f:
                 runs = json.load(f)
         elif rname == "cycles":

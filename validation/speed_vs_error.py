@@ -20,7 +20,7 @@ import math
 import os
 import sys
 
-COLOURS = {"native": "#d62728", "embree": "#1f77b4", "embree3": "#1f77b4", "embree4": "#17becf", "mitsuba": "#2ca02c", "cycles": "#ff7f0e"}
+COLOURS = {"native": "#d62728", "embree": "#1f77b4", "embree3": "#1f77b4", "embree4": "#17becf", "mitsuba": "#2ca02c", "mitsuba_ptracer": "#98df8a", "cycles": "#ff7f0e"}
 
 
 def load(path):
@@ -140,8 +140,9 @@ def agreement(rows, tolerance=0.2, goal=0.5):
     return "\n".join(out)
 
 
-def svg(rows, cases, width=330, height=240):
-    """Small multiples: one log-log panel per case, relMSE against sample time."""
+def svg(rows, cases, width=330, height=240, colours=COLOURS):
+    """Small multiples: one log-log panel per case, relMSE against sample time; `colours`
+    names the series (backends and references) and their colours, for the legend."""
     panels = []
     for case in cases:
         rs = [r for r in rows if r["case"] == case]
@@ -160,7 +161,7 @@ def svg(rows, cases, width=330, height=240):
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" font-family="sans-serif">',
              f'<rect width="{W}" height="{H}" fill="white"/>']
     # Legend.
-    for i, (name, col) in enumerate(COLOURS.items()):
+    for i, (name, col) in enumerate(colours.items()):
         parts.append(f'<rect x="{10 + i * 90}" y="8" width="14" height="4" fill="{col}"/><text x="{28 + i * 90}" y="14" font-size="11">{name}</text>')
     for k, (case, series) in enumerate(panels):
         ox, oy = (k % cols) * width, 30 + (k // cols) * height
@@ -180,7 +181,7 @@ def svg(rows, cases, width=330, height=240):
         parts.append(f'<text x="{ox + width / 2 - 40}" y="{oy + height - 12}" font-size="10">sample time (log)</text>')
         for name, c in series.items():
             line = " ".join(f"{x(p['seconds']):.1f},{y(p['rel_mse']):.1f}" for p in sorted(c, key=lambda p: p["seconds"]) if p["seconds"] > 0 and p["rel_mse"] > 0)
-            parts.append(f'<polyline points="{line}" fill="none" stroke="{COLOURS.get(name, "#333")}" stroke-width="2"/>')
+            parts.append(f'<polyline points="{line}" fill="none" stroke="{colours.get(name, "#333")}" stroke-width="2"/>')
     parts.append("</svg>")
     return "\n".join(parts)
 

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# BDPT against our path tracer at equal time (validation/bdpt_vs_path.py) on
+# the scenes of docs/design/bdpt.md: the diffuse box, the caustic under
+# CBspheres' glass sphere at -m 8, the floor around CBgems' gems. Appends the
+# ratios to docs/validation/bdpt-vs-path.csv, keeps both curves of every row in
+# docs/validation/bdpt-vs-path.json and plots them in
+# docs/validation/bdpt-vs-path.svg. About 5 minutes on 2 cores; run it with
+# nothing else running (the ratios are timings).
+#
+#   scripts/measure-bdpt.sh [--seeds N] [--ladder 4,16,64]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+seeds=5; ladder=4,16,64
+while (($#)); do
+    case "$1" in
+        --seeds) seeds=$2; shift 2 ;;
+        --ladder) ladder=$2; shift 2 ;;
+        *) echo "measure-bdpt.sh: unknown argument $1 (expected --seeds N, --ladder A,B,C)" >&2; exit 2 ;;
+    esac
+done
+bash validation/setup >/dev/null
+cargo build --release -q
+scenes=../shared/scenes/cs184/sky
+out=docs/validation/bdpt-vs-path
+run() {
+    validation/.venv/bin/python validation/bdpt_vs_path.py "$@" --size 256 192 --ladder "$ladder" --seeds "$seeds" \
+        --csv "$out.csv" --curves "$out.json" --svg "$out.svg"
+}
+run "$scenes/CBspheres_lambertian.dae" -m 5
+run "$scenes/CBspheres.dae" -m 8 --region 135 138 36 12
+run "$scenes/CBgems.dae" -m 5 --region 96 128 64 22
