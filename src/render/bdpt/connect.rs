@@ -17,7 +17,7 @@
 //!
 //! A connection's value assumes its segment is clear; the segment comes back
 //! as `Connection::shadow`, for the caller to trace with the sample's other
-//! connections as one batch (and only when it is worth tracing: `mod.rs`).
+//! connections as one batch (`gather` in `mod.rs`).
 
 use super::vertex::{Kind, Mode, Vertex};
 use super::Bdpt;

@@ -214,10 +214,8 @@ impl Bdpt<'_> {
     /// The sample's radiance from its connections: their shadow rays traced
     /// as one batch, then the MIS weights of the unoccluded ones (the
     /// weights cost more than the rays); light-tracing contributions go to
-    /// `splats`. (Russian roulette on connections worth under 5 % or 20 %
-    /// of their sample's total cut the shadow rays by 8 % or 19 % on CBgems
-    /// and raised the error per sample by 4 % or 12 %, for no time
-    /// measurably saved: docs/design/bdpt.md.)
+    /// `splats`. (Russian roulette on small connections did not pay:
+    /// docs/design/bdpt.md.)
     #[allow(clippy::too_many_arguments)]
     fn gather(&self, accel: &dyn Traversal, found: &mut [Found], light: &[Vertex], camera: &[Vertex], light_nee_ratio: f64, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
         let mut shadows: SmallVec<[Ray; 32]> = SmallVec::new();
