@@ -238,6 +238,27 @@ fn weighted_strategies_sum_to_the_full_image_and_each_alone_estimates_it() {
     for (i, (a, b)) in sum.iter().zip(&full).enumerate() {
         assert!((a - b).abs() <= 1e-4 * b.abs().max(1e-3), "pixel {i}: strategies sum to {a}, the full render has {b}");
     }
+    // The same through mirror and glass, where specular chains change the
+    // densities' measure (`vertex`): the weights must still sum to 1.
+    let (scene, cam) = shipped("CBspheres", w, h);
+    let m = 4u32;
+    let full = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Bidirectional), m, true, 8, 78);
+    let mut sum = vec![0.0; full.len()];
+    for depth in 0..=m as usize {
+        for t in 1..=depth + 2 {
+            let s = depth + 2 - t;
+            if (s, t) == (1, 1) {
+                continue;
+            }
+            let img = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Strategy { s, t, weighted: true }), m, true, 8, 78);
+            for (a, b) in sum.iter_mut().zip(&img) {
+                *a += b;
+            }
+        }
+    }
+    for (i, (a, b)) in sum.iter().zip(&full).enumerate() {
+        assert!((a - b).abs() <= 1e-4 * b.abs().max(1e-3), "CBspheres pixel {i}: strategies sum to {a}, the full render has {b}");
+    }
     // Unweighted, each depth-1 strategy alone estimates all of direct light:
     // NEE (1,2), hitting the light (0,3) and light tracing (2,1).
     let (w, h) = (32, 24);

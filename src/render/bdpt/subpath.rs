@@ -117,10 +117,7 @@ impl Bdpt<'_> {
             let it = Interaction::with_barycentrics(self.scene, &ray, &hit, accel.exact_barycentrics());
             let prev = path.last().expect("a subpath starts with its end point");
             let mut v = Vertex::surface(self.scene, it, -ray.dir, beta);
-            v.pdf_fwd = match prev.kind {
-                Kind::Distant(_) => pdf_dir * v.cos_ng(ray.dir),
-                _ => v.convert(pdf_dir, prev.p()),
-            };
+            v.pdf_fwd = v.density_from(pdf_dir, prev, false);
             path.push(v);
             let i = path.len() - 1;
             if path.len() >= max {
@@ -146,9 +143,13 @@ impl Bdpt<'_> {
             }
             beta *= weight;
             let (fwd, rev) = if bs.delta { (0.0, 0.0) } else { (bs.pdf, bsdf.pdf(bs.wi, wo)) };
-            path[i].delta = bs.delta;
-            let p = v.p();
-            path[i - 1].pdf_rev = path[i - 1].convert(rev, p);
+            if bs.delta {
+                // A specular chain starts here: its density is per projected
+                // solid angle at the vertex that made it (see `vertex`).
+                path[i].delta = true;
+                path[i].pdf_fwd = path[i].density_from(pdf_dir, &path[i - 1], true);
+            }
+            path[i - 1].pdf_rev = path[i - 1].density_from(rev, &path[i], path[i - 1].delta);
             if i >= 2 {
                 let level = match mode {
                     Mode::Radiance => beta.max_element() / radiance_scale,
