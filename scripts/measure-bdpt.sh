@@ -27,5 +27,7 @@ run() {
         --csv "$out.csv" --curves "$out.json" --svg "$out.svg"
 }
 run "$scenes/CBspheres_lambertian.dae" -m 5
-run "$scenes/CBspheres.dae" -m 8 --region 135 138 36 12
-run "$scenes/CBgems.dae" -m 5 --region 96 128 64 22
+# CBspheres: the floor's caustic alone (floor_caustic), and the window of the
+# earlier runs, which also holds the bottom of the ball (caustic_and_ball).
+run "$scenes/CBspheres.dae" -m 8 --region 144 143 28 5 --region 135 138 36 12 --region-names floor_caustic,caustic_and_ball
+run "$scenes/CBgems.dae" -m 5 --region 96 128 64 22 --region-names floor_around_gems

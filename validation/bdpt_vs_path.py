@@ -6,13 +6,15 @@ costs fitted out) for both integrators on the same scene, then relMSE(bdpt) / re
 interpolated at equal time (metrics.equal_time_ratio).
 
   validation/bdpt_vs_path.py SCENE.dae -m 5 [--size 128 96] [--ladder 4,16,64] [--seeds 6]
-      [--region X Y W H] [--integrators path,bdpt] [--threads N] [--backend native]
+      [--region X Y W H [--region ...]] [--region-names A,B] [--integrators path,bdpt]
+      [--threads N] [--backend native]
       [--csv FILE.csv] [--curves FILE.json] [--svg FILE.svg]
 
 Prints one table row per integrator pair; --csv appends the rows (with date, commit and CPU);
 --curves appends both curves of every row to a JSON list, and --svg plots every curve in that
 list (one log-log panel per scene and pixel set: relMSE against sample time).
-The region is in image pixels, (0, 0) at the top left, as the EXR rows run.
+A region is in image pixels, (0, 0) at the top left, as the EXR rows run; each is named in the
+table, the CSV's `pixels` column and the curves by --region-names (default: region, region2, ...).
 """
 import argparse
 import datetime
@@ -63,7 +65,8 @@ def main():
     ap.add_argument("--size", type=int, nargs=2, default=[128, 96])
     ap.add_argument("--ladder", default="4,16,64")
     ap.add_argument("--seeds", type=int, default=6)
-    ap.add_argument("--region", type=int, nargs=4, default=None, metavar=("X", "Y", "W", "H"))
+    ap.add_argument("--region", type=int, nargs=4, action="append", default=[], metavar=("X", "Y", "W", "H"))
+    ap.add_argument("--region-names", default="", help="comma-separated names of the regions, in order")
     ap.add_argument("--integrators", default="path,bdpt")
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--backend", default="native")
@@ -72,6 +75,9 @@ def main():
     ap.add_argument("--curves", default="", help="append every row's two curves to this JSON list")
     ap.add_argument("--svg", default="", help="with --curves: plot every curve of that list here")
     a = ap.parse_args()
+    names = [n for n in a.region_names.split(",") if n] or ["region" if i == 0 else f"region{i + 1}" for i in range(len(a.region))]
+    if len(names) != len(a.region):
+        sys.exit(f"bdpt_vs_path: {len(a.region)} regions but {len(names)} names in --region-names")
     ladder = [int(x) for x in a.ladder.split(",")]
     integrators = a.integrators.split(",")
     runs = {}
@@ -86,11 +92,10 @@ def main():
     top = max(ladder)
     ref = np.mean([img for integ in integrators for n, _, img in runs[integ] if n == top], axis=0)
     masks = {"image": np.ones(ref.shape[:2], dtype=bool)}
-    if a.region:
-        x, y, w, h = a.region
+    for (x, y, w, h), region_name in zip(a.region, names):
         r = np.zeros(ref.shape[:2], dtype=bool)
         r[y:y + h, x:x + w] = True
-        masks["region"] = r
+        masks[region_name] = r
     name = os.path.splitext(os.path.basename(a.scene))[0]
     base = integrators[0]
     rows = []
