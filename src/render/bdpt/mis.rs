@@ -6,10 +6,13 @@
 //! Strategy (s, t) and (s+1, t−1) differ only in how one vertex was made,
 //! so their path densities differ by that vertex's `pdf_rev / pdf_fwd`; a
 //! running product over the path gives every strategy's density relative to
-//! the one used, and the weight is 1 / (1 + Σ ratio²). A delta vertex has
-//! both densities 0, read as 1 so that it cancels from the products, while
-//! any strategy that would connect at it (or at a delta neighbour) is left
-//! out of the sum.
+//! the one used, and the weight is 1 / (1 + Σ ratio²). Through a specular
+//! chain the densities change measure (`vertex`): a delta vertex holds its
+//! density per projected solid angle at the chain's end it was made from,
+//! a vertex made from a delta vertex holds 0, read as 1, so that the
+//! chain's generalized geometry term cancels from the products and the
+//! ratios are the true ones; any strategy that would connect at a delta
+//! vertex (or at a delta neighbour) is left out of the sum.
 //!
 //! Why the power heuristic: it is the path tracer's (NEE against BSDF
 //! samples), so BDPT restricted to s ≤ 1 weighs those two techniques the
