@@ -214,51 +214,11 @@ fn bdpt_matches_the_furnace_closed_form() {
 fn weighted_strategies_sum_to_the_full_image_and_each_alone_estimates_it() {
     let (w, h) = (16, 12);
     let (scene, cam) = cornell(w, h);
-    let m = 2u32;
-    // Same seed: every strategy image is made of the same subpaths and
-    // connections, so the weighted ones add up to the full render's pixels
-    // (up to the rounding of adding them in another order).
-    let full = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Bidirectional), m, true, 8, 77);
-    let mut sum = vec![0.0; full.len()];
-    let mut strategies = Vec::new();
-    for depth in 0..=m as usize {
-        for t in 1..=depth + 2 {
-            let s = depth + 2 - t;
-            if (s, t) == (1, 1) {
-                continue;
-            }
-            strategies.push((s, t));
-            let img = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Strategy { s, t, weighted: true }), m, true, 8, 77);
-            for (a, b) in sum.iter_mut().zip(&img) {
-                *a += b;
-            }
-        }
-    }
-    assert_eq!(strategies.len(), 1 + 3 + 4);
-    for (i, (a, b)) in sum.iter().zip(&full).enumerate() {
-        assert!((a - b).abs() <= 1e-4 * b.abs().max(1e-3), "pixel {i}: strategies sum to {a}, the full render has {b}");
-    }
+    assert_eq!(assert_weighted_strategies_sum(&scene, &cam, 2, 77, "Cornell box"), 1 + 3 + 4);
     // The same through mirror and glass, where specular chains change the
     // densities' measure (`vertex`): the weights must still sum to 1.
     let (scene, cam) = shipped("CBspheres", w, h);
-    let m = 4u32;
-    let full = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Bidirectional), m, true, 8, 78);
-    let mut sum = vec![0.0; full.len()];
-    for depth in 0..=m as usize {
-        for t in 1..=depth + 2 {
-            let s = depth + 2 - t;
-            if (s, t) == (1, 1) {
-                continue;
-            }
-            let img = render_image(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Strategy { s, t, weighted: true }), m, true, 8, 78);
-            for (a, b) in sum.iter_mut().zip(&img) {
-                *a += b;
-            }
-        }
-    }
-    for (i, (a, b)) in sum.iter().zip(&full).enumerate() {
-        assert!((a - b).abs() <= 1e-4 * b.abs().max(1e-3), "CBspheres pixel {i}: strategies sum to {a}, the full render has {b}");
-    }
+    assert_weighted_strategies_sum(&scene, &cam, 4, 78, "CBspheres");
     // Unweighted, each depth-1 strategy alone estimates all of direct light:
     // NEE (1,2), hitting the light (0,3) and light tracing (2,1).
     let (w, h) = (32, 24);
@@ -268,6 +228,34 @@ fn weighted_strategies_sum_to_the_full_image_and_each_alone_estimates_it() {
         let alone = replicates(&scene, &cam, BackendKind::Native, Estimator::Bdpt(Technique::Strategy { s, t, weighted: false }), 1, false, spp, 12, 12 + s as u64);
         assert_agree(&path, &alone, &format!("strategy ({s},{t}) alone vs path -m 1 -o 0"), 0.03);
     }
+}
+
+/// Renders every MIS-weighted strategy image of `-m m` with the same seed as
+/// the full render and asserts that they sum to it pixel by pixel: every
+/// strategy image is made of the same subpaths and connections, so only the
+/// rounding of adding them in another order may differ. Returns how many
+/// strategies there were.
+fn assert_weighted_strategies_sum(scene: &Scene, cam: &Camera, m: u32, seed: u64, label: &str) -> usize {
+    let full = render_image(scene, cam, BackendKind::Native, Estimator::Bdpt(Technique::Bidirectional), m, true, 8, seed);
+    let mut sum = vec![0.0; full.len()];
+    let mut strategies = 0;
+    for depth in 0..=m as usize {
+        for t in 1..=depth + 2 {
+            let s = depth + 2 - t;
+            if (s, t) == (1, 1) {
+                continue;
+            }
+            strategies += 1;
+            let img = render_image(scene, cam, BackendKind::Native, Estimator::Bdpt(Technique::Strategy { s, t, weighted: true }), m, true, 8, seed);
+            for (a, b) in sum.iter_mut().zip(&img) {
+                *a += b;
+            }
+        }
+    }
+    for (i, (a, b)) in sum.iter().zip(&full).enumerate() {
+        assert!((a - b).abs() <= 1e-4 * b.abs().max(1e-3), "{label} pixel {i}: strategies sum to {a}, the full render has {b}");
+    }
+    strategies
 }
 
 fn pathtracer(dir: &Path, args: &[&str]) -> std::process::Output {

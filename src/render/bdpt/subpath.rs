@@ -117,7 +117,7 @@ impl Bdpt<'_> {
             let it = Interaction::with_barycentrics(self.scene, &ray, &hit, accel.exact_barycentrics());
             let prev = path.last().expect("a subpath starts with its end point");
             let mut v = Vertex::surface(self.scene, it, -ray.dir, beta);
-            v.pdf_fwd = v.density_from(pdf_dir, prev, false);
+            v.pdf_fwd = v.density_from(pdf_dir, prev);
             path.push(v);
             let i = path.len() - 1;
             if path.len() >= max {
@@ -147,9 +147,9 @@ impl Bdpt<'_> {
                 // A specular chain starts here: its density is per projected
                 // solid angle at the vertex that made it (see `vertex`).
                 path[i].delta = true;
-                path[i].pdf_fwd = path[i].density_from(pdf_dir, &path[i - 1], true);
+                path[i].pdf_fwd = path[i].density_from(pdf_dir, &path[i - 1]);
             }
-            path[i - 1].pdf_rev = path[i - 1].density_from(rev, &path[i], path[i - 1].delta);
+            path[i - 1].pdf_rev = path[i - 1].density_from(rev, &path[i]);
             if i >= 2 {
                 let level = match mode {
                     Mode::Radiance => beta.max_element() / radiance_scale,

@@ -164,34 +164,23 @@ impl Vertex {
 
     /// This vertex's density when made from `from` along a direction of
     /// solid-angle density `pdf` there (a light at infinity: `pdf` is its
-    /// disk's area density): per area here, or, when this vertex is a delta
-    /// (`delta`: the start of a specular chain), per projected solid angle
-    /// at `from` (see the module comment). Kept per solid angle at a vertex
-    /// at infinity.
-    pub fn density_from(&self, pdf: f32, from: &Vertex, delta: bool) -> f32 {
+    /// disk's area density): per area here (|cos θ| at this vertex ÷
+    /// distance², no distance after a light at infinity), or, when this
+    /// vertex is a delta (the start of a specular chain), per projected
+    /// solid angle at `from` (see the module comment). Kept per solid angle
+    /// at a vertex at infinity.
+    pub fn density_from(&self, pdf: f32, from: &Vertex) -> f32 {
         if self.is_at_infinity() {
             return pdf;
-        }
-        if delta {
-            let cos = match from.kind {
-                Kind::Distant(_) => 1.0,
-                _ => from.cos_ng(from.dir_to(self)),
-            };
-            return if cos > 0.0 { pdf / cos } else { 0.0 };
         }
         if let Kind::Distant(_) = from.kind {
-            return pdf * self.cos_ng(from.dir_to(self));
+            return if self.delta { pdf } else { pdf * self.cos_ng(from.dir_to(self)) };
         }
-        self.convert(pdf, from.p())
-    }
-
-    /// The area density here of a solid-angle density `pdf` at `from`
-    /// (kept per solid angle at a vertex at infinity).
-    fn convert(&self, pdf: f32, from: Vec3) -> f32 {
-        if self.is_at_infinity() {
-            return pdf;
+        if self.delta {
+            let cos = from.cos_ng(from.dir_to(self));
+            return if cos > 0.0 { pdf / cos } else { 0.0 };
         }
-        let d = self.p() - from;
+        let d = self.p() - from.p();
         let d2 = d.length_squared();
         if !(d2 > 0.0) {
             return 0.0;
@@ -279,7 +268,7 @@ impl Vertex {
             }
             Kind::Escaped => return 0.0,
         };
-        next.density_from(pdf_dir, self, next.delta)
+        next.density_from(pdf_dir, self)
     }
 
     /// The light this vertex lies on: a light vertex's, or the emitter a
@@ -311,7 +300,7 @@ impl Vertex {
             Kind::Distant(_) => power.world().disk_pdf(),
             _ => lights.lights[k].emission_pdf_dir(self.it.ng, self.dir_to(next)),
         };
-        next.density_from(pdf, self, next.delta)
+        next.density_from(pdf, self)
     }
 
     /// A point just off this vertex's surface toward `toward`, as a shadow
@@ -367,9 +356,9 @@ mod tests {
         let from_a = pa_area as f64 * pa_dir as f64 * cos_b / (unfolded * unfolded);
         let from_b = pb_area as f64 * pb_dir as f64 * cos_a / (unfolded * unfolded);
         // `mis`'s chain from b back to a: rev/fwd at b, m, then a.
-        let fwd_b = floor.density_from(0.0, &mirror, false);
-        let (rev_m, fwd_m) = (mirror.density_from(pb_dir, &floor, true), mirror.density_from(pa_dir, &light, true));
-        let rev_a = light.density_from(0.0, &mirror, false);
+        let fwd_b = floor.density_from(0.0, &mirror);
+        let (rev_m, fwd_m) = (mirror.density_from(pb_dir, &floor), mirror.density_from(pa_dir, &light));
+        let rev_a = light.density_from(0.0, &mirror);
         let chain = r0(pb_area) / r0(fwd_b) * r0(rev_m) / r0(fwd_m) * r0(rev_a) / r0(pa_area);
         assert!((chain / (from_b / from_a) - 1.0).abs() < 1e-5, "chain {chain}, true ratio {}", from_b / from_a);
     }
@@ -391,9 +380,9 @@ mod tests {
         let cos_b = floor.cos_ng(-down) as f64;
         let from_sun = p_dir as f64 * p_disk as f64 * cos_b;
         let from_b = pb_area as f64 * pb_dir as f64;
-        let fwd_b = floor.density_from(0.0, &mirror, false);
-        let (rev_m, fwd_m) = (mirror.density_from(pb_dir, &floor, true), mirror.density_from(p_disk, &sun, true));
-        let rev_sun = sun.density_from(0.0, &mirror, false);
+        let fwd_b = floor.density_from(0.0, &mirror);
+        let (rev_m, fwd_m) = (mirror.density_from(pb_dir, &floor), mirror.density_from(p_disk, &sun));
+        let rev_sun = sun.density_from(0.0, &mirror);
         let chain = r0(pb_area) / r0(fwd_b) * r0(rev_m) / r0(fwd_m) * r0(rev_sun) / r0(p_dir);
         assert!((chain / (from_b / from_sun) - 1.0).abs() < 1e-5, "chain {chain}, true ratio {}", from_b / from_sun);
     }
