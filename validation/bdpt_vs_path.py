@@ -51,7 +51,10 @@ def cpu_name():
 
 
 def render(pt, scene, integrator, m, spp, seed, size, threads, backend, out):
-    cmd = [pt, scene, "--integrator", integrator, "-m", str(m), "-s", str(spp), "--seed", str(seed), "-r", str(size[0]), str(size[1]),
+    # "bdpt:specular": --integrator bdpt --bdpt-light-paths specular.
+    integrator, _, light_paths = integrator.partition(":")
+    extra = ["--bdpt-light-paths", light_paths] if light_paths else []
+    cmd = [pt, scene, "--integrator", integrator, *extra, "-m", str(m), "-s", str(spp), "--seed", str(seed), "-r", str(size[0]), str(size[1]),
            "--keep-fov", "-t", str(threads), "--backend", backend, "-f", out + ".png", "--exr", out + ".exr"]
     text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     seconds = float(text.split("| render ")[1].split(" s")[0])

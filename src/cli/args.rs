@@ -102,6 +102,13 @@ pub enum Command {
     CliReference,
 }
 
+/// `--bdpt-light-paths`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BdptLightPaths {
+    All,
+    Specular,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum IntegratorKind {
     /// Light transport: direct lighting (-m 1) or global illumination (-m > 1).
@@ -186,6 +193,13 @@ pub struct RenderArgs {
     /// pbrt-v4's strategy images: the weighted ones sum to the full image
     #[arg(help_heading = "Light transport", long, value_name = "S,T[,weighted]")]
     pub bdpt_strategy: Option<String>,
+    /// With --integrator bdpt: which light subpaths go on past their first
+    /// bounce. all: every one (every strategy); specular: only those whose
+    /// first bounce is a mirror or glass, so light subpaths make only the
+    /// caustics and the camera side the rest, as a path tracer does, at
+    /// a fraction of the cost per sample [default: all]
+    #[arg(help_heading = "Light transport", long, value_enum, value_name = "PATHS")]
+    pub bdpt_light_paths: Option<BdptLightPaths>,
     /// Disable Russian roulette (paths then always run to -m bounces)
     #[arg(help_heading = "Light transport", long)]
     pub no_rr: bool,

@@ -4,14 +4,14 @@
 mod args;
 pub mod docs;
 
-pub use args::{Cli, Command, EnvSamplingArg, IntegratorKind, LightPickArg, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg};
+pub use args::{BdptLightPaths, Cli, Command, EnvSamplingArg, IntegratorKind, LightPickArg, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg};
 
 use crate::accel;
 use crate::camera::{Camera, DEFAULT_HEIGHT, DEFAULT_WIDTH};
 use crate::error::{Error, Result};
 use crate::image_io;
 use crate::light::Lights;
-use crate::render::bdpt::{Bdpt, Technique};
+use crate::render::bdpt::{Bdpt, LightPaths, Technique};
 use crate::render::{self, aov, normals::NormalShading, path::{specular_guide::SpecularGuide, PathTracer}, Adaptive, Integrator, Region, RenderSettings};
 use crate::scene::Bsdf;
 use crate::scene::{builtin, Scene};
@@ -203,6 +203,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     if a.bdpt_strategy.is_some() && a.integrator != IntegratorKind::Bdpt {
         crate::bail!("--bdpt-strategy applies to --integrator bdpt");
     }
+    if a.bdpt_light_paths.is_some() && a.integrator != IntegratorKind::Bdpt {
+        crate::bail!("--bdpt-light-paths applies to --integrator bdpt");
+    }
     if !transport {
         let lighting_flags = [
             (a.light_samples.is_some(), "-l"),
@@ -299,7 +302,11 @@ fn run_render(a: &RenderArgs) -> Result<()> {
                 (None, _) => Technique::Bidirectional,
             };
             let region = region.unwrap_or(Region { x: 0, y: 0, w: width, h: height });
-            Box::new(Bdpt::new(&scene, &lights, &camera, width, height, region, max_depth, accumulate, technique)?)
+            let light_paths = match a.bdpt_light_paths {
+                None | Some(BdptLightPaths::All) => LightPaths::All,
+                Some(BdptLightPaths::Specular) => LightPaths::Specular,
+            };
+            Box::new(Bdpt::new(&scene, &lights, &camera, width, height, region, max_depth, accumulate, technique)?.with_light_paths(light_paths))
         }
     };
     let mut settings = RenderSettings::new(width, height, spp, a.seed);

@@ -14,6 +14,11 @@
 //! ratios are the true ones; any strategy that would connect at a delta
 //! vertex (or at a delta neighbour) is left out of the sum.
 //!
+//! With `LightPaths::Specular` the strategies s ≥ 2 make a path only when
+//! its vertex x1 (the one after the light point) is specular: a function
+//! of the path, so leaving the others out of the sum keeps the weights of
+//! every path summing to 1.
+//!
 //! Why the power heuristic: it is the path tracer's (NEE against BSDF
 //! samples), so BDPT restricted to s ≤ 1 weighs those two techniques the
 //! way the path tracer does, and Veach (thesis §9.2.4) found it better than
@@ -40,7 +45,7 @@
 //! unbiased.
 
 use super::vertex::{Kind, Vertex};
-use super::Bdpt;
+use super::{Bdpt, LightPaths};
 
 /// A vertex's densities and delta flag, as one strategy sees them.
 #[derive(Clone, Copy)]
@@ -147,13 +152,21 @@ impl Bdpt<'_> {
         // Every ratio below is relative to this strategy's density: with
         // s = 1 that density has a_nee where the chain has a_emit.
         let all = if s == 1 { 1.0 / nee_ratio } else { 1.0 };
+        // With `LightPaths::Specular`, strategies with s ≥ 2 make only
+        // paths whose vertex x1 (after the light point) is specular.
+        let x1_specular = match s {
+            0 => t >= 2 && camera[t - 2].delta,
+            1 => false,
+            _ => light[1].delta,
+        };
+        let light_side = |s_other: usize| s_other < 2 || x1_specular || self.light_paths == LightPaths::All;
         let share = self.light_tracing_share;
         let mut sum = 0.0f64;
         // Strategies with fewer camera vertices: (s + t − i, i).
         let mut r = 1.0f64;
         for i in (1..t).rev() {
             r *= remap0(cam[i].rev) as f64 / remap0(cam[i].fwd) as f64;
-            if !cam[i].delta && !cam[i - 1].delta {
+            if !cam[i].delta && !cam[i - 1].delta && light_side(s + t - i) {
                 // (s + t − i, i): s' = 1 when i = t − 1 and s = 0.
                 let nee = if s == 0 && i == t - 1 { nee_ratio } else { 1.0 };
                 let term = r * all * nee * if i == 1 { share } else { 1.0 };
@@ -177,7 +190,7 @@ impl Bdpt<'_> {
                     _ => true,
                 }
             };
-            if !lig[i].delta && !before_is_delta {
+            if !lig[i].delta && !before_is_delta && light_side(i) {
                 // (i, s + t − i): s' = 1 when i = 1.
                 let nee = if i == 1 { nee_ratio } else { 1.0 };
                 let term = r * count * all * nee;

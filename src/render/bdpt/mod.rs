@@ -14,6 +14,15 @@
 //! as splats (`render::splat`), kept in exact sums so that renders split by
 //! samples merge to the bits of one render.
 //!
+//! `--bdpt-light-paths specular` (`LightPaths::Specular`) keeps only the
+//! light subpaths whose first bounce is a mirror or glass: the strategies
+//! s ≥ 2 then make only paths L S …, the caustics a path tracer finds badly,
+//! the rest is left to s ≤ 1 (next-event estimation and emitters hit, as in
+//! a path tracer), and the weights count only the strategies that can make
+//! each path (`mis`). Most light subpaths then end after one ray, so a
+//! sample costs little more than a path tracer's (measured in
+//! docs/design/bdpt.md).
+//!
 //! Conventions shared with the path tracer (`render::path`):
 //! * `-m` bounds s + t − 2 (0: emitters seen directly, 1: direct light);
 //!   `-o 0` keeps only paths of exactly `-m` bounces;
@@ -76,6 +85,18 @@ pub enum Technique {
     Strategy { s: usize, t: usize, weighted: bool },
 }
 
+/// Which light subpaths go on past their first bounce.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LightPaths {
+    /// Every one: all of BDPT's strategies.
+    #[default]
+    All,
+    /// Only those whose first bounce is specular (mirror, glass): the
+    /// strategies with s ≥ 2 then make only paths L S …, the caustics, and
+    /// the others are left to the camera side (s ≤ 1), as in a path tracer.
+    Specular,
+}
+
 pub struct Bdpt<'a> {
     scene: &'a Scene,
     lights: &'a Lights,
@@ -93,6 +114,7 @@ pub struct Bdpt<'a> {
     /// The lights at infinity that an escaping camera ray sees (hemisphere,
     /// environment map): strategy s = 0 for each.
     sky: Vec<usize>,
+    light_paths: LightPaths,
 }
 
 impl<'a> Bdpt<'a> {
@@ -112,7 +134,12 @@ impl<'a> Bdpt<'a> {
         let power = LightPower::new(&lights.lights, World::of(scene));
         let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
         let sky = (0..lights.lights.len()).filter(|&k| lights.lights[k].is_at_infinity() && lights.lights[k].is_visible()).collect();
-        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky })
+        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All })
+    }
+
+    /// The same integrator with `light_paths` for its light subpaths.
+    pub fn with_light_paths(self, light_paths: LightPaths) -> Bdpt<'a> {
+        Bdpt { light_paths, ..self }
     }
 
     /// Whether strategy (s, t) is summed.
