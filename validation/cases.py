@@ -50,6 +50,9 @@ ALL = BOTH + ["povray"]  # POV-Ray: direct lighting only
 BDPT = ["--integrator", "bdpt"]
 
 
+BDPT_SPECULAR = BDPT + ["--bdpt-light-paths", "specular"]
+
+
 TIERS = {
     # width, height, our spp, reference spp per render, reference renders, spp ladder (error
     # against time) with independent renders per rung, cases
@@ -94,6 +97,12 @@ TIERS = {
         radiance("CBspheres.dae", 8, BOTH, BDPT, label="BDPT: mirror and glass, -m 8", tag="_bdpt"),
         radiance("CBgems.dae", 5, BOTH, BDPT, label="BDPT: tinted glass gems", tag="_bdpt"),
         radiance("CBbunny.dae", 5, BOTH, BDPT, label="BDPT: diffuse bunny", tag="_bdpt"),
+        # BDPT with only the light subpaths that start with a specular bounce
+        # (`--only _specular_bdpt` runs these alone).
+        radiance("CBspheres.dae", 5, BOTH, BDPT_SPECULAR, label="BDPT, specular light paths: mirror and glass", tag="_specular_bdpt"),
+        radiance("CBspheres.dae", 8, BOTH, BDPT_SPECULAR, label="BDPT, specular light paths: mirror and glass, -m 8", tag="_specular_bdpt"),
+        radiance("CBgems.dae", 5, BOTH, BDPT_SPECULAR, label="BDPT, specular light paths: tinted glass gems", tag="_specular_bdpt"),
+        radiance("CBbunny.dae", 5, BOTH, BDPT_SPECULAR, label="BDPT, specular light paths: diffuse bunny", tag="_specular_bdpt"),
         radiance(CB, 5, BOTH, BDPT, label="BDPT: thin lens -b 0.1 -d 4.5", scene_flags=["-b", "0.1", "-d", "4.5"], tag="_lens_bdpt"),
         radiance("bunny_unlit.dae", 3, BOTH, BDPT, label="BDPT: environment light (studio.exr)", scene_flags=["-e", envmap("studio.exr")], tag="_env_bdpt"),
         radiance(CB, 5, BOTH + ["mitsuba_ptracer"], ["--integrator", "light"], label="light tracing (diffuse: it cannot see mirrors and glass)", tag="_light_bdpt"),

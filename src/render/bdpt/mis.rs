@@ -102,7 +102,7 @@ impl Bdpt<'_> {
         }
         // At most -m + 2 vertices a side: on the stack for the usual depths.
         let mut cam: smallvec::SmallVec<[Densities; 16]> = camera[..t].iter().map(Densities::of).collect();
-        let mut lig: smallvec::SmallVec<[Densities; 16]> = light[..s].iter().map(Densities::of).collect();
+        let mut lig: smallvec::SmallVec<[Densities; 16]> = light[..s.min(light.len())].iter().map(Densities::of).collect();
         fn pick<'v>(i: usize, side: &'v [Vertex], first_sampled: bool, sampled: Option<&'v Vertex>) -> &'v Vertex {
             match (i, first_sampled, sampled) {
                 (0, true, Some(v)) => v,
@@ -115,7 +115,9 @@ impl Bdpt<'_> {
         }
         let ys = (s > 0).then(|| pick(s - 1, light, s == 1, sampled));
         if s == 1 {
-            lig[0] = Densities::of(ys.expect("s = 1"));
+            // The next-event point, whether or not a light subpath was traced.
+            lig.clear();
+            lig.push(Densities::of(ys.expect("s = 1")));
         }
         // The connection's ends are not deltas for this strategy.
         cam[t - 1].delta = false;

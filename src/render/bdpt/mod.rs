@@ -115,6 +115,9 @@ pub struct Bdpt<'a> {
     /// environment map): strategy s = 0 for each.
     sky: Vec<usize>,
     light_paths: LightPaths,
+    /// Whether light subpaths can go on past their light point: false
+    /// with `LightPaths::Specular` in a scene without mirrors or glass.
+    specular_objects: bool,
 }
 
 impl<'a> Bdpt<'a> {
@@ -134,12 +137,13 @@ impl<'a> Bdpt<'a> {
         let power = LightPower::new(&lights.lights, World::of(scene));
         let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
         let sky = (0..lights.lights.len()).filter(|&k| lights.lights[k].is_at_infinity() && lights.lights[k].is_visible()).collect();
-        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All })
+        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All, specular_objects: true })
     }
 
     /// The same integrator with `light_paths` for its light subpaths.
     pub fn with_light_paths(self, light_paths: LightPaths) -> Bdpt<'a> {
-        Bdpt { light_paths, ..self }
+        let specular_objects = light_paths == LightPaths::All || has_delta_objects(self.scene);
+        Bdpt { light_paths, specular_objects, ..self }
     }
 
     /// Whether strategy (s, t) is summed.
@@ -187,11 +191,15 @@ impl Integrator for Bdpt<'_> {
         let mut camera: Path = Path::new();
         let mut light: Path = Path::new();
         self.camera_subpath(accel, ray, hit, sampler, &mut camera, camera_vertices, rays);
-        self.light_subpath(accel, sampler, &mut light, m + 1, rays);
+        // Without mirrors or glass, specular light paths make nothing.
+        if self.specular_objects {
+            self.light_subpath(accel, sampler, &mut light, m + 1, rays);
+        }
         let light_nee_ratio = if light.len() >= 2 && self.weighted() { self.nee_ratio(&light[0], &light[1]) } else { 1.0 };
         let mut found: SmallVec<[Found; 32]> = SmallVec::new();
         for t in 1..=camera.len() {
-            for s in 0..=light.len() {
+            // Next-event estimation (s = 1) draws its own light point.
+            for s in 0..=light.len().max(usize::from(!self.power.is_empty())) {
                 if !self.uses(s, t) {
                     continue;
                 }
@@ -217,6 +225,15 @@ impl Integrator for Bdpt<'_> {
         }
         self.gather(accel, &mut found, &light, &camera, light_nee_ratio, rays, splats)
     }
+}
+
+/// Whether some object of `scene` scatters by delta lobes alone (mirror,
+/// glass): without one, specular light paths make no path at all.
+fn has_delta_objects(scene: &Scene) -> bool {
+    (0..scene.shapes.len()).any(|g| {
+        let m = scene.material_of(g as u32);
+        m.emission == Vec3::ZERO && crate::bsdf::Bsdf::of(&m.bsdf, true).is_some_and(|b| b.is_delta())
+    })
 }
 
 /// A strategy's contribution, before its shadow ray is traced.
