@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# BDPT against our path tracer at equal time (validation/bdpt_vs_path.py) on
+# BDPT (every light subpath, and --bdpt-light-paths specular: bdpt:specular)
+# against our path tracer at equal time (validation/bdpt_vs_path.py) on
 # the scenes of docs/design/bdpt.md: the diffuse box, the caustic under
 # CBspheres' glass sphere at -m 8, the floor around CBgems' gems. Appends the
 # ratios to docs/validation/bdpt-vs-path.csv, keeps both curves of every row in
 # docs/validation/bdpt-vs-path.json and plots them in
-# docs/validation/bdpt-vs-path.svg. About 5 minutes on 2 cores; run it with
+# docs/validation/bdpt-vs-path.svg. About 8 minutes on 2 cores; run it with
 # nothing else running (the ratios are timings).
 #
 #   scripts/measure-bdpt.sh [--seeds N] [--ladder 4,16,64]
@@ -23,7 +24,7 @@ cargo build --release -q
 scenes=../shared/scenes/cs184/sky
 out=docs/validation/bdpt-vs-path
 run() {
-    validation/.venv/bin/python validation/bdpt_vs_path.py "$@" --size 256 192 --ladder "$ladder" --seeds "$seeds" \
+    validation/.venv/bin/python validation/bdpt_vs_path.py "$@" --size 256 192 --ladder "$ladder" --seeds "$seeds" --integrators path,bdpt,bdpt:specular \
         --csv "$out.csv" --curves "$out.json" --svg "$out.svg"
 }
 run "$scenes/CBspheres_lambertian.dae" -m 5

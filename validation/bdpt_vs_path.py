@@ -6,13 +6,14 @@ costs fitted out) for both integrators on the same scene, then relMSE(bdpt) / re
 interpolated at equal time (metrics.equal_time_ratio).
 
   validation/bdpt_vs_path.py SCENE.dae -m 5 [--size 128 96] [--ladder 4,16,64] [--seeds 6]
-      [--region X Y W H [--region ...]] [--region-names A,B] [--integrators path,bdpt]
+      [--region X Y W H [--region ...]] [--region-names A,B] [--integrators path,bdpt[,bdpt:specular]]
       [--threads N] [--backend native]
       [--csv FILE.csv] [--curves FILE.json] [--svg FILE.svg]
 
 Prints one table row per integrator pair; --csv appends the rows (with date, commit and CPU);
 --curves appends both curves of every row to a JSON list, and --svg plots every curve in that
 list (one log-log panel per scene and pixel set: relMSE against sample time).
+An integrator "bdpt:specular" is --integrator bdpt --bdpt-light-paths specular.
 A region is in image pixels, (0, 0) at the top left, as the EXR rows run; each is named in the
 table, the CSV's `pixels` column and the curves by --region-names (default: region, region2, ...).
 """
@@ -34,7 +35,7 @@ from metrics import equal_time_ratio, ladder_curve  # noqa: E402
 from speed_vs_error import svg  # noqa: E402
 
 # The integrators' colours in the plot.
-COLOURS = {"path": "#d62728", "bdpt": "#9467bd", "light": "#8c564b"}
+COLOURS = {"path": "#d62728", "bdpt": "#9467bd", "bdpt:specular": "#1f77b4", "light": "#8c564b"}
 
 ROOT = os.path.dirname(HERE)
 

@@ -36,12 +36,15 @@ pub(super) struct Connection {
     pub sampled: Option<Vertex>,
     /// Where a light-tracing contribution lands on the film (t = 1).
     pub film: Option<(f32, f32)>,
+    /// s = 1: a_nee / a_emit of the light point (`Bdpt::nee_ratio`), from
+    /// the density the light sample drew it with; 1 otherwise.
+    pub nee_ratio: f64,
 }
 
 impl Bdpt<'_> {
     pub(super) fn connect(&self, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, sampler: &mut Sampler) -> Option<Connection> {
         let done = |value: Vec3, shadow: Option<Ray>, sampled: Option<Vertex>, film: Option<(f32, f32)>| {
-            (value.max_element() > 0.0 && value.is_finite()).then_some(Connection { value, shadow, sampled, film })
+            (value.max_element() > 0.0 && value.is_finite()).then_some(Connection { value, shadow, sampled, film, nee_ratio: 1.0 })
         };
         if s == 0 {
             let z = &camera[t - 1];
@@ -86,20 +89,23 @@ impl Bdpt<'_> {
             let beta0 = ls.value / (ls.pdf * pmf);
             // The light point and the shadow segment to it; for a light at
             // infinity, its direction and an unbounded shadow ray.
-            let (f, shadow, y0) = match ls.target {
+            let (f, shadow, y0, nee_ratio) = match ls.target {
                 Target::Point(target) => {
                     let n = l.normal_at(self.scene, target, ls.prim);
-                    let origin_pdf = pmf * l.emission_pdf_pos(self.power.world());
-                    let y0 = Vertex::at_point(Kind::Light(k), target, n, target.abs().max_element(), l.geometry(), ls.prim, beta0, origin_pdf);
-                    (z.f(target, Mode::Radiance), z.it.spawn_ray_to(target), y0)
+                    let emit = l.emission_pdf_pos(self.power.world());
+                    let y0 = Vertex::at_point(Kind::Light(k), target, n, target.abs().max_element(), l.geometry(), ls.prim, beta0, pmf * emit);
+                    // The sample's density per area at the light point (a
+                    // point light: its position density, 1).
+                    let nee = if n == Vec3::ZERO { 1.0 } else { ls.pdf * n.dot(ls.wi).abs() / (target - z.p()).length_squared() };
+                    (z.f(target, Mode::Radiance), z.it.spawn_ray_to(target), y0, super::mis::nee_over_emit(nee, emit))
                 }
                 Target::Infinite => {
                     let y0 = Vertex::distant(k, Vec3::ZERO, ls.wi, beta0, pmf * l.infinite_pdf_dir(ls.wi));
-                    (z.f_dir(ls.wi, Mode::Radiance), z.it.spawn_ray(ls.wi), y0)
+                    (z.f_dir(ls.wi, Mode::Radiance), z.it.spawn_ray(ls.wi), y0, 1.0)
                 }
             };
             let value = z.beta * f * z.cos(ls.wi) * ls.value / (ls.pdf * pmf);
-            return done(value, Some(shadow), Some(y0), None);
+            return done(value, Some(shadow), Some(y0), None).map(|c| Connection { nee_ratio, ..c });
         }
         let y = &light[s - 1];
         if !y.connectible() {

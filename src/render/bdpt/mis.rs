@@ -70,10 +70,17 @@ fn remap0(x: f32) -> f32 {
     }
 }
 
+/// a_nee / a_emit from the two area densities of a light point (1 where
+/// either is not a positive number).
+pub(super) fn nee_over_emit(nee: f32, emit: f32) -> f64 {
+    if emit > 0.0 && nee > 0.0 && (nee / emit).is_finite() {
+        (nee / emit) as f64
+    } else {
+        1.0
+    }
+}
+
 impl Bdpt<'_> {
-    /// The weight of strategy (s, t) for the path `light[..s]` + `camera[..t]`,
-    /// with `sampled` standing for `light[0]` (s = 1: the next-event light
-    /// point) or `camera[0]` (t = 1: the lens point chosen toward the scene).
     /// a_nee / a_emit of light point `y0` connected to `y1` (see the module
     /// comment); 1 where `y0` is not on a light.
     pub(super) fn nee_ratio(&self, y0: &Vertex, y1: &Vertex) -> f64 {
@@ -85,18 +92,17 @@ impl Bdpt<'_> {
         let Some(k) = y0.light(self.lights) else { return 1.0 };
         let l = &self.lights.lights[k];
         let emit = l.emission_pdf_pos(self.power.world());
-        let nee = l.sample_pdf_area(self.scene, y1.p(), y0.p(), y0.it.ng, y0.it.prim_id);
-        if emit > 0.0 && nee > 0.0 && (nee / emit).is_finite() {
-            (nee / emit) as f64
-        } else {
-            1.0
-        }
+        nee_over_emit(l.sample_pdf_area(self.scene, y1.p(), y0.p(), y0.it.ng, y0.it.prim_id), emit)
     }
 
-    /// `light_nee_ratio`: `nee_ratio(light[0], light[1])`, the same for every
-    /// strategy with s ≥ 2, so computed once per light subpath.
-    #[allow(clippy::too_many_arguments)]
-    pub(super) fn mis_weight(&self, light: &[Vertex], camera: &[Vertex], sampled: Option<&Vertex>, s: usize, t: usize, light_nee_ratio: f64) -> f32 {
+    /// The weight of strategy (s, t) for the path `light[..s]` + `camera[..t]`,
+    /// with `sampled` standing for `light[0]` (s = 1: the next-event light
+    /// point) or `camera[0]` (t = 1: the lens point chosen toward the scene).
+    /// `given_nee_ratio`: `nee_ratio` of this path's y0 for s ≥ 1, as the
+    /// caller has it: the light subpath's (s ≥ 2, the same for all those
+    /// strategies, so computed once per subpath) or the next-event
+    /// connection's (s = 1, from the density its light sample had).
+    pub(super) fn mis_weight(&self, light: &[Vertex], camera: &[Vertex], sampled: Option<&Vertex>, s: usize, t: usize, given_nee_ratio: f64) -> f32 {
         if s + t == 2 {
             return 1.0;
         }
@@ -148,8 +154,7 @@ impl Bdpt<'_> {
         // from y1 over its density as a light subpath's start.
         let nee_ratio = match s {
             0 => self.nee_ratio(zt, &camera[t - 2]),
-            1 => self.nee_ratio(ys.expect("s = 1"), zt),
-            _ => light_nee_ratio,
+            _ => given_nee_ratio,
         };
         // Every ratio below is relative to this strategy's density: with
         // s = 1 that density has a_nee where the chain has a_emit.

@@ -249,7 +249,7 @@ impl Bdpt<'_> {
     /// Strategy (s, t)'s MIS weight (1 for the unweighted techniques).
     fn weight(&self, light: &[Vertex], camera: &[Vertex], c: &Connection, s: usize, t: usize, light_nee_ratio: f64) -> f32 {
         if self.weighted() {
-            self.mis_weight(light, camera, c.sampled.as_ref(), s, t, light_nee_ratio)
+            self.mis_weight(light, camera, c.sampled.as_ref(), s, t, if s == 1 { c.nee_ratio } else { light_nee_ratio })
         } else {
             1.0
         }
