@@ -68,6 +68,9 @@ pub mod dim {
     pub const EMIT_POINT: u32 = 12;
     pub const EMIT_DIRECTION: u32 = 13;
     pub const LENS_CONNECT: u32 = 14;
+    /// Whether a pixel sample traces a light subpath at all
+    /// (`--bdpt-light-paths specular`).
+    pub const EMIT_SHARE: u32 = 15;
 
     /// The id of `slot` at vertex `vertex` of a light subpath (0 = on the
     /// light): bit 47 set, which no camera-side id below `k` = 2^39 has.

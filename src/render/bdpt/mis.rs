@@ -19,6 +19,13 @@
 //! of the path, so leaving the others out of the sum keeps the weights of
 //! every path summing to 1.
 //!
+//! With specular light paths a pixel sample traces its light subpath with
+//! probability `light_share` (`mod.rs`), so the strategies s ≥ 2 have that
+//! share of the camera's sample count: it enters their terms as Veach's
+//! n_k p_k, like light tracing's share of a `-p` cell. (Any weights that sum
+//! to 1 keep the estimate unbiased; the counts make them the power
+//! heuristic's for these sample numbers.)
+//!
 //! Why the power heuristic: it is the path tracer's (NEE against BSDF
 //! samples), so BDPT restricted to s ≤ 1 weighs those two techniques the
 //! way the path tracer does, and Veach (thesis §9.2.4) found it better than
@@ -168,6 +175,10 @@ impl Bdpt<'_> {
         };
         let light_side = |s_other: usize| s_other < 2 || x1_specular || self.light_paths == LightPaths::All;
         let share = self.light_tracing_share;
+        // Light subpaths per camera sample (`Bdpt::light_share`): the count
+        // of the strategies s ≥ 2 relative to this one's.
+        let subpaths = |s_other: usize| if s_other >= 2 { self.light_share as f64 } else { 1.0 };
+        let own = subpaths(s);
         let mut sum = 0.0f64;
         // Strategies with fewer camera vertices: (s + t − i, i).
         let mut r = 1.0f64;
@@ -176,7 +187,7 @@ impl Bdpt<'_> {
             if !cam[i].delta && !cam[i - 1].delta && light_side(s + t - i) {
                 // (s + t − i, i): s' = 1 when i = t − 1 and s = 0.
                 let nee = if s == 0 && i == t - 1 { nee_ratio } else { 1.0 };
-                let term = r * all * nee * if i == 1 { share } else { 1.0 };
+                let term = r * all * nee * if i == 1 { share } else { 1.0 } * subpaths(s + t - i) / own;
                 sum += term * term;
             }
         }
@@ -200,7 +211,7 @@ impl Bdpt<'_> {
             if !lig[i].delta && !before_is_delta && light_side(i) {
                 // (i, s + t − i): s' = 1 when i = 1.
                 let nee = if i == 1 { nee_ratio } else { 1.0 };
-                let term = r * count * all * nee;
+                let term = r * count * all * nee * subpaths(i) / own;
                 sum += term * term;
             }
         }

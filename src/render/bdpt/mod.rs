@@ -19,9 +19,10 @@
 //! s ≥ 2 then make only paths L S …, the caustics a path tracer finds badly,
 //! the rest is left to s ≤ 1 (next-event estimation and emitters hit, as in
 //! a path tracer), and the weights count only the strategies that can make
-//! each path (`mis`). Most light subpaths then end after one ray, so a
-//! sample costs little more than a path tracer's (measured in
-//! docs/design/bdpt.md).
+//! each path (`mis`). Most light subpaths then end after one ray, and only
+//! half the pixel samples trace one (`SPECULAR_LIGHT_SHARE`; the strategies
+//! s ≥ 2 divide by that share), so a sample costs 1.6–2× a path tracer's
+//! where every light subpath costs 5–7× (measured in docs/design/bdpt.md).
 //!
 //! Conventions shared with the path tracer (`render::path`):
 //! * `-m` bounds s + t − 2 (0: emitters seen directly, 1: direct light);
@@ -62,7 +63,7 @@ use crate::error::Result;
 use crate::light::emission::{LightPower, World};
 use crate::light::Lights;
 use crate::ray::Ray;
-use crate::sampler::Sampler;
+use crate::sampler::{dim, Sampler};
 use crate::scene::Scene;
 use glam::Vec3;
 use smallvec::SmallVec;
@@ -118,7 +119,18 @@ pub struct Bdpt<'a> {
     /// Whether light subpaths can go on past their light point: false
     /// with `LightPaths::Specular` in a scene without mirrors or glass.
     specular_objects: bool,
+    /// The probability that a pixel sample traces a light subpath (1, or
+    /// `SPECULAR_LIGHT_SHARE` with `LightPaths::Specular`): the strategies
+    /// s ≥ 2 then have this share of the camera's sample count, in their
+    /// contributions (÷ it) and in the MIS weights (`mis`).
+    light_share: f32,
 }
+
+/// `Bdpt::light_share` with specular light paths. Measured against our path
+/// tracer at equal time (docs/design/bdpt.md): CBgems 1.11 at 1, 0.78 at
+/// 0.5, 0.81 at 0.25; CBspheres `-m 8` 0.61, 0.56, 0.60 (its floor caustic
+/// 0.103, 0.106, 0.126).
+pub const SPECULAR_LIGHT_SHARE: f32 = 0.5;
 
 impl<'a> Bdpt<'a> {
     /// The integrator for a render of `region` of a `width`×`height` frame.
@@ -137,13 +149,14 @@ impl<'a> Bdpt<'a> {
         let power = LightPower::new(&lights.lights, World::of(scene));
         let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
         let sky = (0..lights.lights.len()).filter(|&k| lights.lights[k].is_at_infinity() && lights.lights[k].is_visible()).collect();
-        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All, specular_objects: true })
+        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All, specular_objects: true, light_share: 1.0 })
     }
 
     /// The same integrator with `light_paths` for its light subpaths.
     pub fn with_light_paths(self, light_paths: LightPaths) -> Bdpt<'a> {
         let specular_objects = light_paths == LightPaths::All || has_delta_objects(self.scene);
-        Bdpt { light_paths, specular_objects, ..self }
+        let light_share = if light_paths == LightPaths::All { 1.0 } else { SPECULAR_LIGHT_SHARE };
+        Bdpt { light_paths, specular_objects, light_share, ..self }
     }
 
     /// Whether strategy (s, t) is summed.
@@ -192,7 +205,7 @@ impl Integrator for Bdpt<'_> {
         let mut light: Path = Path::new();
         self.camera_subpath(accel, ray, hit, sampler, &mut camera, camera_vertices, rays);
         // Without mirrors or glass, specular light paths make nothing.
-        if self.specular_objects {
+        if self.specular_objects && (self.light_share >= 1.0 || sampler.get_1d(dim::light_vertex(0, dim::EMIT_SHARE)) < self.light_share) {
             self.light_subpath(accel, sampler, &mut light, m + 1, rays);
         }
         let light_nee_ratio = if light.len() >= 2 && self.weighted() { self.nee_ratio(&light[0], &light[1]) } else { 1.0 };
@@ -280,7 +293,10 @@ impl Bdpt<'_> {
         }
         let mut l = Vec3::ZERO;
         for f in found.iter().filter(|f| f.c.value != Vec3::ZERO) {
-            let value = if f.weighted { f.c.value } else { f.c.value * self.weight(light, camera, &f.c, f.s, f.t, light_nee_ratio) };
+            let mut value = if f.weighted { f.c.value } else { f.c.value * self.weight(light, camera, &f.c, f.s, f.t, light_nee_ratio) };
+            if f.s >= 2 {
+                value /= self.light_share;
+            }
             match f.c.film {
                 Some((x, y)) => splats.push(Splat {
                     x: ((x * self.width as f32) as u32).min(self.width - 1),
