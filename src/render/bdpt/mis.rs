@@ -20,7 +20,7 @@
 //! every path summing to 1.
 //!
 //! With specular light paths a pixel sample traces its light subpath with
-//! probability `light_share` (`mod.rs`), so the strategies s ≥ 2 have that
+//! probability `Bdpt::light_share` (`mod.rs`), so the strategies s ≥ 2 have that
 //! share of the camera's sample count: it enters their terms as Veach's
 //! n_k p_k, like light tracing's share of a `-p` cell. (Any weights that sum
 //! to 1 keep the estimate unbiased; the counts make them the power
@@ -115,7 +115,9 @@ impl Bdpt<'_> {
         }
         // At most -m + 2 vertices a side: on the stack for the usual depths.
         let mut cam: smallvec::SmallVec<[Densities; 16]> = camera[..t].iter().map(Densities::of).collect();
-        let mut lig: smallvec::SmallVec<[Densities; 16]> = light[..s.min(light.len())].iter().map(Densities::of).collect();
+        // s = 1: its next-event point, pushed below (whether or not a light
+        // subpath was traced).
+        let mut lig: smallvec::SmallVec<[Densities; 16]> = light[..if s == 1 { 0 } else { s }].iter().map(Densities::of).collect();
         fn pick<'v>(i: usize, side: &'v [Vertex], first_sampled: bool, sampled: Option<&'v Vertex>) -> &'v Vertex {
             match (i, first_sampled, sampled) {
                 (0, true, Some(v)) => v,
@@ -128,8 +130,6 @@ impl Bdpt<'_> {
         }
         let ys = (s > 0).then(|| pick(s - 1, light, s == 1, sampled));
         if s == 1 {
-            // The next-event point, whether or not a light subpath was traced.
-            lig.clear();
             lig.push(Densities::of(ys.expect("s = 1")));
         }
         // The connection's ends are not deltas for this strategy.
@@ -177,7 +177,8 @@ impl Bdpt<'_> {
         let share = self.light_tracing_share;
         // Light subpaths per camera sample (`Bdpt::light_share`): the count
         // of the strategies s ≥ 2 relative to this one's.
-        let subpaths = |s_other: usize| if s_other >= 2 { self.light_share as f64 } else { 1.0 };
+        let light_share = self.light_share() as f64;
+        let subpaths = |s_other: usize| if s_other >= 2 { light_share } else { 1.0 };
         let own = subpaths(s);
         let mut sum = 0.0f64;
         // Strategies with fewer camera vertices: (s + t − i, i).

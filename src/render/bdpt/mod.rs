@@ -119,11 +119,6 @@ pub struct Bdpt<'a> {
     /// Whether light subpaths can go on past their light point: false
     /// with `LightPaths::Specular` in a scene without mirrors or glass.
     specular_objects: bool,
-    /// The probability that a pixel sample traces a light subpath (1, or
-    /// `SPECULAR_LIGHT_SHARE` with `LightPaths::Specular`): the strategies
-    /// s ≥ 2 then have this share of the camera's sample count, in their
-    /// contributions (÷ it) and in the MIS weights (`mis`).
-    light_share: f32,
 }
 
 /// `Bdpt::light_share` with specular light paths. Measured against our path
@@ -149,14 +144,24 @@ impl<'a> Bdpt<'a> {
         let power = LightPower::new(&lights.lights, World::of(scene));
         let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
         let sky = (0..lights.lights.len()).filter(|&k| lights.lights[k].is_at_infinity() && lights.lights[k].is_visible()).collect();
-        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All, specular_objects: true, light_share: 1.0 })
+        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All, specular_objects: true })
     }
 
     /// The same integrator with `light_paths` for its light subpaths.
     pub fn with_light_paths(self, light_paths: LightPaths) -> Bdpt<'a> {
         let specular_objects = light_paths == LightPaths::All || has_delta_objects(self.scene);
-        let light_share = if light_paths == LightPaths::All { 1.0 } else { SPECULAR_LIGHT_SHARE };
-        Bdpt { light_paths, specular_objects, light_share, ..self }
+        Bdpt { light_paths, specular_objects, ..self }
+    }
+
+    /// The probability that a pixel sample traces a light subpath (1, or
+    /// `SPECULAR_LIGHT_SHARE` with `LightPaths::Specular`): the strategies
+    /// s ≥ 2 then have this share of the camera's sample count, in their
+    /// contributions (÷ it) and in the MIS weights (`mis`).
+    fn light_share(&self) -> f32 {
+        match self.light_paths {
+            LightPaths::All => 1.0,
+            LightPaths::Specular => SPECULAR_LIGHT_SHARE,
+        }
     }
 
     /// Whether strategy (s, t) is summed.
@@ -205,7 +210,8 @@ impl Integrator for Bdpt<'_> {
         let mut light: Path = Path::new();
         self.camera_subpath(accel, ray, hit, sampler, &mut camera, camera_vertices, rays);
         // Without mirrors or glass, specular light paths make nothing.
-        if self.specular_objects && (self.light_share >= 1.0 || sampler.get_1d(dim::light_vertex(0, dim::EMIT_SHARE)) < self.light_share) {
+        let share = self.light_share();
+        if self.specular_objects && (share >= 1.0 || sampler.get_1d(dim::light_vertex(0, dim::EMIT_SHARE)) < share) {
             self.light_subpath(accel, sampler, &mut light, m + 1, rays);
         }
         let light_nee_ratio = if light.len() >= 2 && self.weighted() { self.nee_ratio(&light[0], &light[1]) } else { 1.0 };
@@ -295,7 +301,7 @@ impl Bdpt<'_> {
         for f in found.iter().filter(|f| f.c.value != Vec3::ZERO) {
             let mut value = if f.weighted { f.c.value } else { f.c.value * self.weight(light, camera, &f.c, f.s, f.t, light_nee_ratio) };
             if f.s >= 2 {
-                value /= self.light_share;
+                value /= self.light_share();
             }
             match f.c.film {
                 Some((x, y)) => splats.push(Splat {

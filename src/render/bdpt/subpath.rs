@@ -74,7 +74,6 @@ impl Bdpt<'_> {
             }
             let ray = Ray::new(e.p, e.dir);
             self.walk(accel, ray, None, beta, e.pdf_pos, Mode::Importance, sampler, path, max, rays);
-            self.keep_light_paths(path);
             return;
         }
         let origin_pdf = pmf * e.pdf_pos;
@@ -90,16 +89,6 @@ impl Bdpt<'_> {
         }
         let ray = y0.it.spawn_ray(e.dir);
         self.walk(accel, ray, None, beta, e.pdf_dir, Mode::Importance, sampler, path, max, rays);
-        self.keep_light_paths(path);
-    }
-
-    /// With `LightPaths::Specular`, a light subpath whose first bounce is
-    /// not specular keeps only its light point (the next-event strategy
-    /// s = 1 draws its own).
-    fn keep_light_paths(&self, path: &mut super::Path) {
-        if self.light_paths == LightPaths::Specular && path.len() >= 2 && !path[1].delta {
-            path.truncate(1);
-        }
     }
 
     /// Extend `path` from its last vertex along `ray` (unit direction, drawn
@@ -128,6 +117,11 @@ impl Bdpt<'_> {
             let it = Interaction::with_barycentrics(self.scene, &ray, &hit, accel.exact_barycentrics());
             let prev = path.last().expect("a subpath starts with its end point");
             let mut v = Vertex::surface(self.scene, it, -ray.dir, beta);
+            if mode == Mode::Importance && path.len() == 1 && self.light_paths == LightPaths::Specular && !v.bsdf.is_some_and(|b| b.is_delta()) {
+                // Not a caustic path: the light subpath keeps only its light
+                // point (next-event estimation, s = 1, draws its own).
+                return;
+            }
             v.pdf_fwd = v.density_from(pdf_dir, prev);
             path.push(v);
             let i = path.len() - 1;
@@ -145,10 +139,6 @@ impl Bdpt<'_> {
             let u = if u { sampler.get_2d(draw(dim::BSDF)) } else { (0.0, 0.0) };
             let Some(bs) = bsdf.sample_with(wo, lobe, u) else { return };
             let wi = v.frame.to_world(bs.wi).normalize();
-            if mode == Mode::Importance && i == 1 && !bs.delta && self.light_paths == LightPaths::Specular {
-                // Not a caustic path: `keep_light_paths` drops this vertex.
-                return;
-            }
             let mut weight = bs.weight;
             match mode {
                 Mode::Radiance => radiance_scale *= bs.radiance_scale,
