@@ -395,3 +395,63 @@ fn a_convex_diffuse_ball_under_a_uniform_sky_reflects_albedo_times_the_sky() {
         }
     }
 }
+
+fn lossless_glass() -> pathtracer::scene::Material {
+    pathtracer::scene::Material { name: "glass".into(), bsdf: pathtracer::scene::Bsdf::Glass { reflectance: Vec3::ONE, transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 }, emission: Vec3::ZERO }
+}
+
+#[test]
+fn lossless_glass_vanishes_in_a_uniform_environment() {
+    // Every path from the camera through lossless glass ends in the
+    // environment, with its (η_i/η_t)² factors cancelled, so each pixel is
+    // the environment's radiance exactly — with the camera subpaths split at
+    // the glass (`subpath::Branch`) as without: the branches' throughputs
+    // (each lobe's times its probability) must add up to one. Deep enough
+    // (-m 64) that the branches run out and the rest is picked by lobe.
+    let l = 1.5f64;
+    let env = Arc::new(EnvMap::from_texels("uniform".into(), 8, 4, vec![Vec3::splat(l as f32); 32]));
+    for (what, shape) in [("glass sphere", Shape::Sphere { center: Vec3::ZERO, radius: 0.5 }), ("glass box", Shape::Mesh(flat_cube_mesh(0.4, Vec3::ZERO, false)))] {
+        let scene = scene_of(vec![(shape, lossless_glass())], vec![]);
+        let mut cam = camera_at(&scene, Vec3::new(0.1, 0.2, 1.6), 16, 16);
+        (cam.screen_w, cam.screen_h) = (16, 16);
+        for est in [Estimator::Bdpt(Technique::Bidirectional), Estimator::BdptSpecular(Technique::Bidirectional)] {
+            let img = render_image_env(&scene, Some(env.clone()), &cam, BackendKind::Native, est, 64, true, 4, 3);
+            let worst = img.iter().map(|p| ((p - l) / l).abs()).fold(0.0, f64::max);
+            assert!(worst < 1e-4, "{what}, {est:?}: a pixel is off by {worst:e} of the environment");
+        }
+    }
+}
+
+#[test]
+fn glass_the_camera_sees_follows_both_lobes_instead_of_picking_one() {
+    // At -m 1 a glass sphere under a uniform sky shows only its reflection,
+    // F(θ) L. The path tracer picks reflection with probability F, so a
+    // sample is L or 0; BDPT's camera subpath follows both lobes (the
+    // transmission's path is longer than -m 1 and adds nothing), so a
+    // sample is F(θ) L and varies only with where it falls in the pixel.
+    // Same mean, and per-pixel variance far below the path tracer's
+    // F (1 − F) L² / spp.
+    let l = 2.0f32;
+    let env = Arc::new(EnvMap::from_texels("uniform".into(), 8, 4, vec![Vec3::splat(l); 32]));
+    let scene = scene_of(vec![(Shape::Sphere { center: Vec3::ZERO, radius: 1.2 }, lossless_glass())], vec![]);
+    let mut cam = camera_at(&scene, Vec3::new(0.0, 0.0, 2.5), 16, 16);
+    (cam.screen_w, cam.screen_h) = (16, 16);
+    let k = 16;
+    let images = |est: Estimator, spp: u32, seed: u64| -> Vec<Vec<f64>> { (0..k).map(|i| render_image_env(&scene, Some(env.clone()), &cam, BackendKind::Native, est, 1, true, spp, seed + i)).collect() };
+    let (spp_path, spp_bdpt) = (64, 4);
+    let path = images(Estimator::Path, spp_path, 100);
+    let bdpt = images(Estimator::Bdpt(Technique::Bidirectional), spp_bdpt, 200);
+    // The pixels wholly on the ball: the centre 6×6, their mean per render.
+    let centre: Vec<usize> = (5..11).flat_map(|y| (5..11).map(move |x| y * 16 + x)).collect();
+    let region = |r: &Vec<f64>| centre.iter().map(|&j| r[j]).sum::<f64>() / centre.len() as f64;
+    let (mp, vp, _) = mean_var(path.iter().map(region));
+    let (mb, vb, _) = mean_var(bdpt.iter().map(region));
+    // Near normal incidence F ≈ 0.034: a reflection is seen.
+    assert!(mb > 0.02 * l as f64 && mb < 0.2 * l as f64, "{mb} is not a glass reflection of {l}");
+    let se = (vp + vb).sqrt();
+    assert!((mp - mb).abs() <= 4.0 * se, "path {mp:.5} vs bdpt {mb:.5} (se {se:.5})");
+    // Per-sample variances of a pixel, summed over the centre.
+    let per_sample = |imgs: &[Vec<f64>], spp: u32| centre.iter().map(|&j| mean_var(imgs.iter().map(|r| r[j])).1 * (k * spp as u64) as f64).sum::<f64>();
+    let (var_path, var_bdpt) = (per_sample(&path, spp_path), per_sample(&bdpt, spp_bdpt));
+    assert!(var_path > 0.0 && var_bdpt < 1e-3 * var_path, "BDPT's variance on the ball {var_bdpt:e} is not far below the path tracer's {var_path:e}: a lobe is still picked");
+}

@@ -52,4 +52,14 @@ impl Glass {
         let weight = self.transmittance / (eta * eta);
         (weight != Vec3::ZERO).then_some(BsdfSample { wi, weight, pdf: 1.0 - f, delta: true, radiance_scale: 1.0 / (eta * eta) })
     }
+
+    /// Both lobes `sample` picks from, reflection then transmission, each
+    /// with its probability of being picked in `pdf`; `None` for a lobe
+    /// that cannot be picked (no reflection at F = 0, no transmission
+    /// under total internal reflection) or carries nothing.
+    pub fn lobes(&self, wo: Vec3) -> [Option<BsdfSample>; 2] {
+        let f = self.fresnel(wo);
+        // u = 0 picks reflection whenever F > 0, u = 1 transmission whenever F < 1.
+        [if f > 0.0 { self.sample(wo, 0.0) } else { None }, if f < 1.0 { self.sample(wo, 1.0) } else { None }]
+    }
 }

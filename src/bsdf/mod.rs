@@ -121,6 +121,18 @@ impl Bsdf {
         }
     }
 
+    /// The lobes of a model that picks between two delta lobes (glass:
+    /// reflection and transmission), each with the probability `sample`
+    /// picks it in `pdf`, for an integrator that follows both (splitting:
+    /// each branch's throughput is `weight × pdf`); `None` for every other
+    /// model.
+    pub fn delta_lobes(&self, wo: Vec3) -> Option<[Option<BsdfSample>; 2]> {
+        match self {
+            Bsdf::Glass(b) => Some(b.lobes(wo)),
+            _ => None,
+        }
+    }
+
     /// Which numbers `sample_with` uses: (the lobe choice, the 2D draw).
     pub fn draws(&self) -> (bool, bool) {
         match self {

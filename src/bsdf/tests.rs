@@ -169,6 +169,37 @@ fn glass_obeys_snell_conserves_energy_and_reflects_totally_inside() {
 }
 
 #[test]
+fn glass_delta_lobes_are_what_sample_picks_with_their_probabilities() {
+    let mut rng = Rng::new(5, 0);
+    for theta in [0.0f32, 30.0, 43.0, 60.0, 85.0] {
+        for front in [true, false] {
+            let b = Glass { reflectance: Vec3::new(0.9, 0.8, 0.7), transmittance: Vec3::new(0.5, 0.6, 1.0), ior: 1.45, front };
+            let wo = dir(theta, 30.0);
+            let f = b.fresnel(wo);
+            let [r, t] = Bsdf::Glass(b).delta_lobes(wo).expect("glass has two delta lobes");
+            let r = r.expect("F > 0 at every angle with ior 1.45");
+            assert!(r.wi.z > 0.0 && (r.pdf - f).abs() < 1e-7 && r.weight == b.reflectance);
+            match t {
+                None => assert_eq!(f, 1.0, "only total internal reflection drops the transmission ({theta} {front})"),
+                Some(t) => {
+                    assert!(t.wi.z < 0.0 && (t.pdf - (1.0 - f)).abs() < 1e-7);
+                    // Every sample is one of the two lobes, exactly.
+                    for _ in 0..200 {
+                        let s = Bsdf::Glass(b).sample(wo, &mut rng).unwrap();
+                        let lobe = if s.wi.z > 0.0 { r } else { t };
+                        assert!(s.wi == lobe.wi && s.weight == lobe.weight && s.pdf == lobe.pdf && s.radiance_scale == lobe.radiance_scale);
+                    }
+                }
+            }
+        }
+    }
+    // Models with one lobe, or not delta, do not split.
+    let wo = dir(30.0, 0.0);
+    assert!(Bsdf::Mirror(Mirror { reflectance: Vec3::ONE }).delta_lobes(wo).is_none());
+    assert!(Bsdf::Diffuse(Diffuse { albedo: Vec3::ONE }).delta_lobes(wo).is_none());
+}
+
+#[test]
 fn refraction_transmits_everything_and_ends_the_path_on_total_internal_reflection() {
     let r = |front| Bsdf::Refraction(Refraction { transmittance: Vec3::new(1.0, 0.9, 0.8), ior: 1.45, front });
     let mut rng = Rng::new(3, 0);

@@ -4,9 +4,11 @@
 //! the camera sees in or through mirrors and glass, since no connection
 //! can end at a delta vertex).
 //!
-//! Each pixel sample traces a camera subpath from its camera ray and a light
-//! subpath from a light (`subpath`), then joins every prefix of one to every
-//! prefix of the other (`connect`): strategy (s, t) uses s light vertices
+//! Each pixel sample traces a camera subpath from its camera ray (two or
+//! more where the camera sees glass through mirrors and glass alone: it
+//! follows both lobes there, `subpath::Branch`) and a light subpath from a
+//! light (`subpath`), then joins every prefix of one to every prefix of the
+//! other (`connect`): strategy (s, t) uses s light vertices
 //! and t camera vertices, a path of s + t − 2 bounces. Each strategy's
 //! contribution is weighted against all the others that could have made the
 //! same path (`mis`, the power heuristic), so their sum estimates the image.
@@ -36,9 +38,10 @@
 //! Differences from pbrt-v4: the power heuristic (`mis`); Veach's adjoint
 //! shading-normal correction on light subpaths (pbrt-v4 omits it, which its
 //! users found makes BDPT and path tracing disagree); Russian roulette on
-//! both subpaths (`subpath`); next-event points drawn by solid angle
-//! (`connect`); exact splats. Lights at infinity (directional, hemisphere,
-//! environment map) start light subpaths on the disk of the scene's
+//! both subpaths and splitting at glass seen by the camera (`subpath`);
+//! next-event points drawn by solid angle (`connect`); exact splats.
+//! Lights at infinity (directional, hemisphere, environment map) start
+//! light subpaths on the disk of the scene's
 //! bounding sphere facing their direction, as in pbrt-v4; the environment
 //! map's directions are drawn by its own importance sampling alone (the
 //! path tracer's products with the cosine and with glossy lobes are not
@@ -72,6 +75,10 @@ use vertex::{Kind, Vertex};
 
 /// A subpath's vertices.
 type Path = SmallVec<[Vertex; 8]>;
+
+/// A pixel sample's camera subpaths: one, or the branches of one that split
+/// at glass (`subpath::Branch`).
+type Paths = SmallVec<[Path; 1]>;
 
 /// Which strategies a render sums.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -206,9 +213,9 @@ impl Integrator for Bdpt<'_> {
             _ => m + 2,
         };
         // On the stack for the usual depths (`-m` up to 6).
-        let mut camera: Path = Path::new();
+        let mut cameras: Paths = Paths::new();
         let mut light: Path = Path::new();
-        self.camera_subpath(accel, ray, hit, sampler, &mut camera, camera_vertices, rays);
+        self.camera_subpaths(accel, ray, hit, sampler, &mut cameras, camera_vertices, rays);
         // Without mirrors or glass, specular light paths make nothing.
         let share = self.light_share();
         if self.specular_objects && (share >= 1.0 || sampler.get_1d(dim::light_vertex(0, dim::EMIT_SHARE)) < share) {
@@ -216,33 +223,36 @@ impl Integrator for Bdpt<'_> {
         }
         let light_nee_ratio = if light.len() >= 2 && self.weighted() { self.nee_ratio(&light[0], &light[1]) } else { 1.0 };
         let mut found: SmallVec<[Found; 32]> = SmallVec::new();
-        for t in 1..=camera.len() {
-            // Next-event estimation (s = 1) draws its own light point.
-            for s in 0..=light.len().max(usize::from(!self.power.is_empty())) {
-                if !self.uses(s, t) {
-                    continue;
-                }
-                if s == 0 && camera[t - 1].kind == Kind::Escaped {
-                    // One strategy per light at infinity the escape sees.
-                    let mut ends: Path = camera[..t].iter().copied().collect();
-                    for &k in &self.sky {
-                        ends[t - 1].kind = Kind::Distant(k);
-                        // No shadow ray: weighted here, against these ends.
-                        found.extend(self.connect(&light, &ends, s, t, sampler).map(|c| {
-                            let w = self.weight(&light, &ends, &c, s, t, light_nee_ratio);
-                            Found { c: Connection { value: c.value * w, ..c }, s, t, weighted: true }
-                        }));
+        for (branch, camera) in cameras.iter().enumerate() {
+            // Light tracing (t = 1) shares only the lens point: once per sample.
+            for t in 1 + usize::from(branch > 0)..=camera.len() {
+                // Next-event estimation (s = 1) draws its own light point.
+                for s in 0..=light.len().max(usize::from(!self.power.is_empty())) {
+                    if !self.uses(s, t) {
+                        continue;
                     }
-                    continue;
+                    if s == 0 && camera[t - 1].kind == Kind::Escaped {
+                        // One strategy per light at infinity the escape sees.
+                        let mut ends: Path = camera[..t].iter().copied().collect();
+                        for &k in &self.sky {
+                            ends[t - 1].kind = Kind::Distant(k);
+                            // No shadow ray: weighted here, against these ends.
+                            found.extend(self.connect(&light, &ends, s, t, sampler).map(|c| {
+                                let w = self.weight(&light, &ends, &c, s, t, light_nee_ratio);
+                                Found { c: Connection { value: c.value * w, ..c }, s, t, branch, weighted: true }
+                            }));
+                        }
+                        continue;
+                    }
+                    if s == 0 && self.technique == Technique::LightTracing {
+                        // Emitters the camera ray hits are light tracing's (s = 1, t = 1).
+                        continue;
+                    }
+                    found.extend(self.connect(&light, camera, s, t, sampler).map(|c| Found { c, s, t, branch, weighted: false }));
                 }
-                if s == 0 && self.technique == Technique::LightTracing {
-                    // Emitters the camera ray hits are light tracing's (s = 1, t = 1).
-                    continue;
-                }
-                found.extend(self.connect(&light, &camera, s, t, sampler).map(|c| Found { c, s, t, weighted: false }));
             }
         }
-        self.gather(accel, &mut found, &light, &camera, light_nee_ratio, rays, splats)
+        self.gather(accel, &mut found, &light, &cameras, light_nee_ratio, rays, splats)
     }
 }
 
@@ -260,6 +270,8 @@ struct Found {
     c: Connection,
     s: usize,
     t: usize,
+    /// Which of the sample's camera subpaths it uses.
+    branch: usize,
     /// `c.value` already has its MIS weight.
     weighted: bool,
 }
@@ -280,7 +292,7 @@ impl Bdpt<'_> {
     /// `splats`. (Russian roulette on small connections did not pay:
     /// docs/design/bdpt.md.)
     #[allow(clippy::too_many_arguments)]
-    fn gather(&self, accel: &dyn Traversal, found: &mut [Found], light: &[Vertex], camera: &[Vertex], light_nee_ratio: f64, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
+    fn gather(&self, accel: &dyn Traversal, found: &mut [Found], light: &[Vertex], cameras: &[Path], light_nee_ratio: f64, rays: &mut u64, splats: &mut Vec<Splat>) -> Vec3 {
         let mut shadows: SmallVec<[Ray; 32]> = SmallVec::new();
         let mut traced: SmallVec<[usize; 32]> = SmallVec::new();
         for (i, f) in found.iter().enumerate() {
@@ -299,7 +311,7 @@ impl Bdpt<'_> {
         }
         let mut l = Vec3::ZERO;
         for f in found.iter().filter(|f| f.c.value != Vec3::ZERO) {
-            let mut value = if f.weighted { f.c.value } else { f.c.value * self.weight(light, camera, &f.c, f.s, f.t, light_nee_ratio) };
+            let mut value = if f.weighted { f.c.value } else { f.c.value * self.weight(light, &cameras[f.branch], &f.c, f.s, f.t, light_nee_ratio) };
             if f.s >= 2 {
                 value /= self.light_share();
             }
