@@ -40,7 +40,7 @@ use glam::Vec3;
 const RR_WEIGHT_FLOOR: f32 = 0.25;
 
 /// At most this many camera subpaths per pixel sample (see `Branch`).
-pub const MAX_CAMERA_SUBPATHS: usize = 8;
+pub const MAX_CAMERA_SUBPATHS: usize = 4;
 
 /// Splitting at glass the camera sees through mirrors and glass alone (as
 /// Cycles' former branched path tracer followed every closure at the
