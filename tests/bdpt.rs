@@ -455,3 +455,24 @@ fn glass_the_camera_sees_follows_both_lobes_instead_of_picking_one() {
     let (var_path, var_bdpt) = (per_sample(&path, spp_path), per_sample(&bdpt, spp_bdpt));
     assert!(var_path > 0.0 && var_bdpt < 1e-3 * var_path, "BDPT's variance on the ball {var_bdpt:e} is not far below the path tracer's {var_path:e}: a lobe is still picked");
 }
+
+#[test]
+fn every_shipped_scene_renders_with_bdpt_and_light_tracing_on_every_fast_backend() {
+    // All 20 CS184 scenes (mirror, glass, refraction, microfacet, every
+    // light kind they use): none refused, no NaN or Inf (`render_image`
+    // asserts it), with BDPT in both light-path modes and light tracing.
+    let backends: Vec<BackendKind> = common::backends().into_iter().filter(|b| *b != BackendKind::Brute).collect();
+    let mut rendered = Vec::new();
+    for path in common::shipped_scenes() {
+        let (scene, cam) = shrunk(common::load(&path), 40, 30);
+        pathtracer::cli::check_materials(&scene).unwrap_or_else(|e| panic!("{}: refused: {e}", path.display()));
+        for &backend in &backends {
+            for est in [Estimator::Bdpt(Technique::Bidirectional), Estimator::BdptSpecular(Technique::Bidirectional), Estimator::Bdpt(Technique::LightTracing)] {
+                render_image(&scene, &cam, backend, est, 5, true, 2, 13);
+            }
+        }
+        rendered.push(scene.name);
+    }
+    assert_eq!(rendered.len(), 20, "{rendered:?}");
+    eprintln!("BDPT and light tracing finite on {} scenes with {backends:?}", rendered.len());
+}
