@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{camera_at, diffuse, flat_cube_mesh, scene_of, sidak, Scratch};
+use common::{camera_at, diffuse, flat_cube_mesh, lossless_glass, scene_of, sidak, Scratch};
 use glam::Vec3;
 use pathtracer::accel::BackendKind;
 use pathtracer::camera::Camera;
@@ -394,10 +394,6 @@ fn a_convex_diffuse_ball_under_a_uniform_sky_reflects_albedo_times_the_sky() {
             }
         }
     }
-}
-
-fn lossless_glass() -> pathtracer::scene::Material {
-    pathtracer::scene::Material { name: "glass".into(), bsdf: pathtracer::scene::Bsdf::Glass { reflectance: Vec3::ONE, transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 }, emission: Vec3::ZERO }
 }
 
 #[test]

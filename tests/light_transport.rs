@@ -544,11 +544,7 @@ fn light_and_hemisphere_sampling_agree_with_microfacet_and_glass_spheres() {
         bsdf: pathtracer::scene::Bsdf::Microfacet { alpha: 0.3, eta: Vec3::new(0.33228, 1.0162, 1.2474), k: Vec3::new(3.1646, 2.5785, 2.4603) },
         emission: Vec3::ZERO,
     });
-    scene.materials.push(pathtracer::scene::Material {
-        name: "glass".into(),
-        bsdf: pathtracer::scene::Bsdf::Glass { reflectance: Vec3::ONE, transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 },
-        emission: Vec3::ZERO,
-    });
+    scene.materials.push(common::lossless_glass());
     scene.objects[spheres[0]].material = scene.materials.len() - 2;
     scene.objects[spheres[1]].material = scene.materials.len() - 1;
     // Seeds 5/6. With 1/2 one floor block read z = 3.5 in the plain diffuse box too

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{camera_at, flat_cube_mesh, scene_of, z_crit};
+use common::{camera_at, flat_cube_mesh, lossless_glass, scene_of, z_crit};
 use glam::{Mat3, Vec3};
 use pathtracer::accel::BackendKind;
 use pathtracer::camera::Camera;
@@ -17,10 +17,6 @@ use std::sync::Arc;
 
 fn material(name: &str, bsdf: Bsdf) -> Material {
     Material { name: name.into(), bsdf, emission: Vec3::ZERO }
-}
-
-fn glass() -> Material {
-    material("glass", Bsdf::Glass { reflectance: Vec3::ONE, transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 })
 }
 
 fn uniform_env(l: Vec3) -> Arc<EnvMap> {
@@ -75,12 +71,12 @@ fn lossless_spheres_and_boxes_vanish_in_a_uniform_environment_at_any_offset_and_
     let mut checked = 0;
     for (offset, scale) in [(Vec3::ZERO, 1.0f32), (Vec3::splat(8192.0), 1.0), (Vec3::ZERO, 1e-3), (Vec3::new(-3.0, 2.0, 1.0), 1e3)] {
         let shapes: Vec<(&str, Shape, Material)> = vec![
-            ("glass sphere", Shape::Sphere { center: offset, radius: 0.5 * scale }, glass()),
+            ("glass sphere", Shape::Sphere { center: offset, radius: 0.5 * scale }, lossless_glass()),
             ("mirror sphere", Shape::Sphere { center: offset, radius: 0.5 * scale }, mirror.clone()),
             // Inside a sphere the internal angle equals the refraction
             // angle, below the critical angle: CS184's refraction loses nothing.
             ("refraction sphere", Shape::Sphere { center: offset, radius: 0.5 * scale }, refraction.clone()),
-            ("glass box", Shape::Mesh(transformed(&flat_cube_mesh(0.4, Vec3::ZERO, false), offset, Vec3::splat(scale))), glass()),
+            ("glass box", Shape::Mesh(transformed(&flat_cube_mesh(0.4, Vec3::ZERO, false), offset, Vec3::splat(scale))), lossless_glass()),
             ("mirror box", Shape::Mesh(transformed(&flat_cube_mesh(0.4, Vec3::ZERO, false), offset, Vec3::splat(scale))), mirror.clone()),
         ];
         for (what, shape, mat) in shapes {
@@ -106,7 +102,7 @@ fn a_camera_inside_glass_sees_the_outside_brightened_by_ior_squared() {
     // radiance L looks 1.45² L bright, whatever the path does inside.
     // CS184's convention would give L / 1.45².
     let l = Vec3::splat(0.5);
-    let scene = scene_of(vec![(Shape::Sphere { center: Vec3::ZERO, radius: 1.0 }, glass())], vec![]);
+    let scene = scene_of(vec![(Shape::Sphere { center: Vec3::ZERO, radius: 1.0 }, lossless_glass())], vec![]);
     let cam = camera(&scene, Vec3::new(0.05, -0.1, 0.2), 16, 16);
     for backend in fast_backends() {
         let out = render_env(&scene, &cam, uniform_env(l), backend, 64, false, true, 4, 2);
@@ -138,7 +134,7 @@ fn total_internal_reflection_traps_light_in_a_glass_slab() {
     let l = Vec3::ONE;
     for offset in [Vec3::ZERO, Vec3::splat(8192.0)] {
         let slab = transformed(&flat_cube_mesh(1.0, Vec3::ZERO, false), offset, Vec3::new(1e4, 0.5, 1e4));
-        let scene = scene_of(vec![(Shape::Mesh(slab), glass())], vec![]);
+        let scene = scene_of(vec![(Shape::Mesh(slab), lossless_glass())], vec![]);
         for backend in fast_backends() {
             for (angle, trapped) in [(60f32, true), (50.0, true), (30.0, false)] {
                 let a = angle.to_radians();

@@ -138,6 +138,12 @@ pub fn diffuse(name: &str, albedo: f32, emission: f32) -> Material {
     Material { name: name.into(), bsdf: Bsdf::Diffuse { albedo: Vec3::splat(albedo) }, emission: Vec3::splat(emission) }
 }
 
+/// Smooth glass of index 1.45 that reflects and transmits everything
+/// (CS184's `<glass>` with reflectance and transmittance 1).
+pub fn lossless_glass() -> Material {
+    Material { name: "glass".into(), bsdf: Bsdf::Glass { reflectance: Vec3::ONE, transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 }, emission: Vec3::ZERO }
+}
+
 /// A welded cube [-h,h]^3 (shared vertices), every triangle wound to face
 /// `inward` or outward. Its vertex normals are CS184's area-weighted ones,
 /// diagonal at the corners.

@@ -192,7 +192,10 @@ impl Bdpt<'_> {
             // Both lobes, when this vertex splits: the other one goes on as a
             // branch, from a copy of the path made once this vertex is final.
             let mut other = None;
-            let bs = match bsdf.delta_lobes(wo).filter(|_| w.specular_prefix && branches.left > 0) {
+            // (Asked only where a split is allowed: both lobes cost two Fresnel
+            // terms and a refraction.)
+            let lobes = if w.specular_prefix && branches.left > 0 { bsdf.delta_lobes(wo) } else { None };
+            let bs = match lobes {
                 Some([Some(reflect), Some(transmit)]) => {
                     branches.left -= 1;
                     let mut branch = w;
