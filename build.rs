@@ -135,7 +135,39 @@ fn compile(major: u32, found: &Found) -> Result<String, String> {
     Ok(header_version(found.include.as_deref(), major))
 }
 
+/// The files the binary is built from: a change to any of them makes the
+/// build differ from its commit.
+const BINARY_INPUTS: [&str; 6] = ["src", "native", "build.rs", "Cargo.toml", "Cargo.lock", "scenes/cs184/sky/CBspheres_lambertian.dae"];
+
+/// The commit the binary is built from, for `--version`: "commit X", with
+/// "+ changes" where the binary's inputs differ from it, or "built outside
+/// git". Reruns when the commit, the index or an input changes.
+fn git_commit() -> String {
+    let root = PathBuf::from(env::var("CARGO_MANIFEST_DIR").unwrap());
+    let git = |args: &[&str]| Command::new("git").arg("-C").arg(&root).args(args).output().ok().filter(|o| o.status.success()).map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
+    let (Some(commit), Some(git_dir)) = (git(&["rev-parse", "--short=12", "HEAD"]), git(&["rev-parse", "--absolute-git-dir"])) else {
+        return "built outside git".into();
+    };
+    let git_dir = PathBuf::from(git_dir);
+    for f in ["HEAD", "index", "packed-refs"] {
+        println!("cargo:rerun-if-changed={}", git_dir.join(f).display());
+    }
+    if let Some(head_ref) = git(&["symbolic-ref", "-q", "HEAD"]) {
+        println!("cargo:rerun-if-changed={}", git_dir.join(head_ref).display());
+    }
+    for input in BINARY_INPUTS {
+        println!("cargo:rerun-if-changed={input}");
+    }
+    let mut status = vec!["status", "--porcelain", "--untracked-files=no", "--"];
+    status.extend(BINARY_INPUTS);
+    match git(&status) {
+        Some(s) if s.is_empty() => format!("commit {commit}"),
+        _ => format!("commit {commit} + changes"),
+    }
+}
+
 fn main() {
+    println!("cargo:rustc-env=PATHTRACER_GIT_COMMIT={}", git_commit());
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=native/shim.c");
     println!("cargo:rerun-if-changed=native/shim.h");

@@ -358,11 +358,11 @@ mod corpus {
 
     pub fn write(dir: &Path) -> Result<()> {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-        let shared = root.join("../shared/scenes/cs184/sky");
+        let sky = root.join("scenes/cs184/sky");
         // COLLADA: the point-lit cube, the same cube under the hemisphere
         // light and a directional light, the emissive plane, and Cornell
         // boxes with an area light, CGL spheres, mirror, glass, microfacet.
-        let cube = strip_blender(&read(&root.join("scenes/cube.dae"))?);
+        let cube = strip_blender(&read(&root.join("scenes/cs184/simple/cube.dae"))?);
         put(dir, "dae", "cube.dae", cube.as_bytes())?;
         let point = cube.find("<point>").zip(cube.find("</point>")).map(|(a, b)| a..b + "</point>".len()).expect("cube.dae has a point light");
         let mut hemi = cube.clone();
@@ -371,9 +371,9 @@ mod corpus {
         let mut sun = cube.clone();
         sun.replace_range(point, "<directional>\n          <color>2 2 2</color>\n        </directional>");
         put(dir, "dae", "cube_directional.dae", sun.as_bytes())?;
-        put(dir, "dae", "plane.dae", strip_blender(&read(&root.join("scenes/plane.dae"))?).as_bytes())?;
+        put(dir, "dae", "plane.dae", strip_blender(&read(&root.join("scenes/cs184/simple/plane.dae"))?).as_bytes())?;
         for name in ["CBspheres.dae", "CBspheres_microfacet_al_ag.dae", "CBspheres_refract.dae"] {
-            put(dir, "dae", name, strip_blender(&read(&shared.join(name))?).as_bytes())?;
+            put(dir, "dae", name, strip_blender(&read(&sky.join(name))?).as_bytes())?;
         }
         // OBJ: positions, texture coordinates and normals in every face
         // form, quads, negative indices, groups, comments, a material line.

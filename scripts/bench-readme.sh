@@ -10,10 +10,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" != "--paste-only" ]; then
     cargo build --release -q --features peers
-    commit="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src native build.rs Cargo.toml || echo '+local changes')"
+    measured="$(python3 validation/provenance.py)"
     ./target/release/pathtracer bench --markdown docs/benchmarks/bench.md --csv docs/benchmarks/bench.csv "$@"
     embree="$(./target/release/pathtracer --version | sed -n 's/^embree[34]: //p' | paste -sd '&' | sed 's/&/ and /')"
     [ -n "$embree" ] || embree="no Embree"
-    sed -i "1i Run $(date +%Y-%m-%d) at commit $commit (\`scripts/bench-readme.sh\`; $embree)." docs/benchmarks/bench.md
+    sed -i "1i $measured\n\nWritten by \`scripts/bench-readme.sh\` ($embree)." docs/benchmarks/bench.md
 fi
 python3 scripts/bench-summary.py --paste

@@ -18,8 +18,7 @@ RAYS = ["camera", "shadow", "random"]
 def main():
     rows = list(csv.DictReader(open(os.path.join(ROOT, "docs", "benchmarks", "bench.csv"))))
     bench_md = open(os.path.join(ROOT, "docs", "benchmarks", "bench.md")).read().splitlines()
-    run = next((l for l in bench_md if l.startswith("Run ")), "Run of unknown date and commit.")
-    machine = next((l for l in bench_md if l.startswith("Machine:")), "Machine: unknown.")
+    run = next((l for l in bench_md if l.startswith("Measured ")), "Measured at an unknown date and commit.")
     speed = {(r["scene"], r["rays"], int(r["threads"]), r["backend"]): float(r["mrays_per_s"]) for r in rows}
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     threads = sorted({int(r["threads"]) for r in rows})
@@ -43,7 +42,7 @@ def main():
         return f"{min(r):.2f}" if r else "–"
 
     out = [f"Native's ray throughput ÷ each contender's on the same rays (above 1: native is faster), at {lo} / {hi} "
-           f"threads, from one `pathtracer bench` run. {run} {machine}", ""]
+           f"threads, from one `pathtracer bench` run (`scripts/bench-readme.sh`). {run}", ""]
     head = "| scene | " + " | ".join(f"÷ {main_peer}: {k}" if i == 0 else k for i, k in enumerate(RAYS)) + "".join(f" | ÷ {o} (worst)" for o in others) + " |"
     out += [head, "|---|" + "---:|" * (len(RAYS) + len(others))]
     out += [f"| {s} | " + " | ".join(cell(s, k, main_peer) for k in RAYS) + "".join(f" | {worst(s, o)}" for o in others) + " |"

@@ -6,7 +6,7 @@ cargo build --release -q
 pt=target/release/pathtracer
 g=docs/gallery
 mkdir -p "$g"
-bunny=${SCENES:-../shared/scenes/cs184}/sky/CBbunny.dae
+bunny=${SCENES:-scenes/cs184}/sky/CBbunny.dae
 size=(-r 200 150 --keep-fov --seed 1)
 for m in 0 1 2 3 4 5; do
     "$pt" "$bunny" "${size[@]}" -s 256 -m $m -f "$g/bunny_m${m}.png" > /dev/null
@@ -22,9 +22,9 @@ done
 "$pt" "$bunny" "${size[@]}" -s 1024 -a 64 0.05 -m 5 -f "$g/bunny_adaptive.png" > /dev/null
 # Every shipped scene at -m 5 (256 spp). Scenes with no light of their own (the meshedit
 # and simple scenes, the _unlit ones) are lit by the courtyard environment map (-e).
-envs=${ENVMAPS:-../shared/envmaps}
+envs=${ENVMAPS:-scenes/envmaps}
 mkdir -p "$g/scenes"
-for f in ${SCENES:-../shared/scenes/cs184}/*/*.dae; do
+for f in ${SCENES:-scenes/cs184}/*/*.dae; do
     name=$(basename "$f" .dae)
     probe=$("$pt" "$f" -r 8 8 -s 1 -m 0 -f /tmp/gallery-probe.png)
     if grep -q "has no light" <<< "$probe"; then
@@ -35,7 +35,7 @@ for f in ${SCENES:-../shared/scenes/cs184}/*/*.dae; do
 done
 rm -f /tmp/gallery-probe.png /tmp/gallery-probe_rate.png
 # Environment light with depth of field: the copper bunny in the studio, focused on the bunny (3.3 from the camera).
-"$pt" ${SCENES:-../shared/scenes/cs184}/sky/bunny_microfacet_cu_unlit.dae -r 400 300 --keep-fov --seed 1 -s 512 -m 8 \
+"$pt" ${SCENES:-scenes/cs184}/sky/bunny_microfacet_cu_unlit.dae -r 400 300 --keep-fov --seed 1 -s 512 -m 8 \
     -e "$envs/studio.exr" -b 0.06 -d 3.3 -f "$g/env_dof.png" > /dev/null
 rm -f "$g"/*_rate.png.tmp
 # Keep only the rate image of the adaptive render.

@@ -21,13 +21,13 @@ while (($#)); do
 done
 bash validation/setup >/dev/null
 cargo build --release -q
-scenes=../shared/scenes/cs184/sky
+scenes=scenes/cs184/sky
 out=docs/validation/bdpt-vs-path
 run() {
     validation/.venv/bin/python validation/bdpt_vs_path.py "$@" --size 256 192 --ladder "$ladder" --seeds "$seeds" --integrators path,bdpt,bdpt:specular \
         --csv "$out.csv" --curves "$out.json" --svg "$out.svg"
 }
-run "$scenes/CBspheres_lambertian.dae" -m 5
+run "$scenes/cs184/sky/CBspheres_lambertian.dae" -m 5
 # CBspheres: the floor's caustic alone (floor_caustic), and the window of the
 # earlier runs, which also holds the bottom of the ball (caustic_and_ball).
 run "$scenes/CBspheres.dae" -m 8 --region 144 143 28 5 --region 135 138 36 12 --region-names floor_caustic,caustic_and_ball

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Error against time for the sampling techniques (issue 13's protocol): for
+# Error against time for the sampling techniques (the protocol of docs/benchmarks/sampling-techniques.md): for
 # each scene, a high-spp reference, then every combination of the axes that
 # scene exercises — sampler (independent | sobol) x light sampling (area |
 # solid-angle: rectangles and spheres) x sky sampling (uniform | lune: the
@@ -37,15 +37,15 @@ while (($#)); do
 done
 keys=("$@")
 ((${#keys[@]})) || keys=(m1 m5 bunny env spheres)
-shared="${PATHTRACER_SHARED_SCENES:-../shared/scenes/cs184}"
-envmaps="$(dirname "$shared")/../envmaps"
+shared=scenes/cs184
+envmaps=scenes/envmaps
 cargo build --release --quiet
 pt="$PWD/target/release/pathtracer"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
 need() {
-    [[ -e "$1" ]] || { echo "measure-sampling: $1 not found (the shared scenes and maps)" >&2; exit 1; }
+    [[ -e "$1" ]] || { echo "measure-sampling: $1 not found (scenes/cs184 and scenes/envmaps in the repository)" >&2; exit 1; }
 }
 args_of() {
     case "$1" in

@@ -1,15 +1,15 @@
 #!/usr/bin/env bash
-# Thread scaling (issue 14): `pathtracer bench --threads 1,2,4,8,16` per scene (native and
+# Thread scaling: `pathtracer bench --threads 1,2,4,8,16` per scene (native and
 # Embree, plus the peers built in unless BENCH_ARGS says --no-peers), then, with RENDERS=1,
 # CBbunny and CBspheres path-traced at 480x360, 32 spp, -m 5 at each thread count per backend,
 # with each image's md5 (the same seed must give the same image at any thread count). One bench
-# process per scene, each appending to the output as it finishes, so a run cut short (a lent
+# process per scene, each appending to the output as it finishes, so a run cut short (a
 # machine's time limit) keeps what it measured: the scenes go cheapest first.
 #
-#   scripts/measure-scaling.sh [OUT_DIR] [THREADS]     # defaults: docs/benchmarks/scaling, 1,2,4,8,16
+#   scripts/measure-scaling.sh [OUT_DIR] [THREADS]     # defaults: target/scaling (not committed), 1,2,4,8,16
 #
 # Environment:
-#   PT=path/to/pathtracer  a binary built elsewhere (the lent 16-core machines have no Rust:
+#   PT=path/to/pathtracer  a binary built elsewhere (for a machine without Rust:
 #                          a --features peers build carried there with libembree3 and libtbb);
 #                          otherwise this builds one with --features peers
 #   SCENES="cow CBbunny grass:2M@262144 ..."  bench scenes in order; NAME@N times N rays
@@ -17,10 +17,10 @@
 #                          at 0.3 Mrays/s on one thread)
 #   BENCH_ARGS="--passes 3 --throughput-only"  more `pathtracer bench` options
 #   RENDERS=1              also time the renders
-# Scene names are looked up as `bench` does ($PATHTRACER_SCENES, ./scenes, ../shared/scenes/cs184).
+# Scene names are looked up as `bench` does ($PATHTRACER_SCENES, ./scenes, scenes/cs184).
 set -uo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-docs/benchmarks/scaling}
+out=${1:-target/scaling}
 threads=${2:-1,2,4,8,16}
 scenes=${SCENES:-cow CBbunny maxplanck beetle arch:2M stadium:2M subdiv:bunny:1.5M sphere:1M arch:10M sphere:5M grass:2M}
 if [ -z "${PT:-}" ]; then
@@ -46,7 +46,7 @@ done
 [ "${RENDERS:-0}" = 1 ] || exit 0
 : > "$out/render.txt"
 find_scene() {
-    for d in "${PATHTRACER_SCENES:-}" scenes ../shared/scenes/cs184/*; do
+    for d in "${PATHTRACER_SCENES:-}" scenes scenes/cs184/*; do
         [ -n "$d" ] && [ -f "$d/$1.dae" ] && { echo "$d/$1.dae"; return; }
     done
     echo "measure-scaling: $1.dae not found" >&2

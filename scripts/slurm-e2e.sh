@@ -166,7 +166,8 @@ tree() {
 }
 
 same_images() { # local render dir, merged dir
-    cmp -s "$1/img.png" "$2/img.png" && cmp -s "$1/img_rate.png" "$2/img_rate.png" \
+    cmp -s "$1/img.png" "$2/img.png" \
+        && { { [ ! -e "$1/img_rate.png" ] && [ ! -e "$2/img_rate.png" ]; } || cmp -s "$1/img_rate.png" "$2/img_rate.png"; } \
         && cmp -s "$1/img.exr" "$2/img.exr" && cmp -s "$1/var.exr" "$2/var.exr"
 }
 

@@ -6,11 +6,32 @@
 use std::fmt;
 
 #[derive(Debug, Clone, PartialEq)]
-pub struct Error(pub String);
+pub struct Error(pub String, pub Cause);
+
+/// Whose mistake an error is: the command line's (exit status 2) or the
+/// work's (a file, a render; exit status 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cause {
+    Failure,
+    Usage,
+}
 
 impl Error {
     pub fn new(msg: impl Into<String>) -> Self {
-        Error(msg.into())
+        Error(msg.into(), Cause::Failure)
+    }
+
+    /// An error in the command line itself: a flag's value or combination.
+    pub fn usage(msg: impl Into<String>) -> Self {
+        Error(msg.into(), Cause::Usage)
+    }
+
+    pub fn into_usage(self) -> Self {
+        Error(self.0, Cause::Usage)
+    }
+
+    pub fn is_usage(&self) -> bool {
+        self.1 == Cause::Usage
     }
 }
 

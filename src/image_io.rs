@@ -87,6 +87,50 @@ pub fn write_png(path: &Path, img: &Rgb) -> Result<()> {
     write_rgba_png(path, img.width, img.height, data)
 }
 
+/// The 8-bit formats `-f` writes, named by the file's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DisplayFormat {
+    Png,
+    /// Baseline JPEG at quality 95 (lossy; no alpha).
+    Jpeg,
+}
+
+/// JPEG quality for `-f NAME.jpg`: high enough that the tone step's
+/// banding, not the compression, is what one sees.
+const JPEG_QUALITY: u8 = 95;
+
+impl DisplayFormat {
+    /// The format `path`'s extension names (case-insensitive), or one line
+    /// saying which extensions are accepted.
+    pub fn of(path: &Path) -> Result<DisplayFormat> {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("png") => Ok(DisplayFormat::Png),
+            Some("jpg" | "jpeg") => Ok(DisplayFormat::Jpeg),
+            Some(other) => Err(Error::new(format!("{}: cannot write images of type '.{other}': name a .png, .jpg or .jpeg file (linear radiance: --exr FILE.exr)", path.display()))),
+            None => Err(Error::new(format!("{}: no file extension: name a .png, .jpg or .jpeg file", path.display()))),
+        }
+    }
+}
+
+/// The tone-mapped image in the format its extension names (PNG or JPEG).
+pub fn write_display(path: &Path, img: &Rgb) -> Result<()> {
+    match DisplayFormat::of(path)? {
+        DisplayFormat::Png => write_png(path, img),
+        DisplayFormat::Jpeg => {
+            let mut data = Vec::with_capacity(img.pixels.len() * 3);
+            for p in &img.pixels {
+                data.extend_from_slice(&[tone_byte(p.x), tone_byte(p.y), tone_byte(p.z)]);
+            }
+            atomically(path, |tmp| {
+                let file = std::fs::File::create(tmp).map_err(|e| e.to_string())?;
+                let mut enc = image::codecs::jpeg::JpegEncoder::new_with_quality(std::io::BufWriter::new(file), JPEG_QUALITY);
+                enc.encode(&data, img.width, img.height, image::ExtendedColorType::Rgb8).map_err(|e| e.to_string())
+            })
+        }
+    }
+}
+
 /// `<name>_rate.png`: samples taken per pixel over the maximum, colour-mapped.
 pub fn write_rate_png(path: &Path, w: u32, h: u32, samples: &[u32], max_samples: u32) -> Result<()> {
     let mut data = Vec::with_capacity(samples.len() * 4);

@@ -185,14 +185,16 @@ pub fn verify(paths: &[PathBuf]) -> Result<()> {
 
 /// The `merge` command: write the images the one-machine render writes.
 pub fn run(paths: &[PathBuf], png: &Path, exr: Option<&Path>, variance_exr: Option<&Path>) -> Result<()> {
+    crate::cli::check_output_names(Some(png), exr, variance_exr)?;
     let m = merge(paths)?;
     let spp = m.header.spp()?;
     let out = &m.output;
-    // -f is required here, so the rate image is always written (as the render does with -f).
-    let written = crate::cli::write_images(out, png, true, exr, variance_exr, spp)?;
+    // The rate image where the parts ran adaptive sampling, as the render does.
+    let adaptive = m.header.get("adaptive").is_some_and(|a| a != "none");
+    let written = crate::cli::write_images(out, png, adaptive, exr, variance_exr, spp)?;
     let samples: u64 = out.samples.iter().map(|&n| n as u64).sum();
     if m.bad_samples > 0 {
-        println!("warning: {} samples had a NaN or out-of-range value (counted as 0 or ±2^36)", m.bad_samples);
+        eprintln!("warning: {} samples had a NaN or out-of-range value (counted as 0 or ±2^36)", m.bad_samples);
     }
     println!(
         "{} | merged {} parts ({} split) | {samples} samples | {} rays | render {:.3} s, CPU {:.3} s summed over parts | wrote {}",

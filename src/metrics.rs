@@ -1,4 +1,4 @@
-//! Image error metrics (see ../shared/notes/validation.md §2).
+//! Image error metrics (relMSE, relative bias; docs/validation/speed-vs-error.md).
 
 use crate::image_io::Rgb;
 

@@ -166,7 +166,7 @@ fn bdpt_agrees_with_the_path_tracer_on_every_backend() {
     }
 }
 
-/// A shipped scene from ../shared (missing data fails loudly).
+/// A shipped scene from scenes/cs184 (missing data fails loudly).
 fn shipped(name: &str, w: u32, h: u32) -> (Scene, Camera) {
     shrunk(common::load(&common::scene_path("sky", name)), w, h)
 }

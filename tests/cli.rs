@@ -26,7 +26,9 @@ fn no_arguments_renders_the_builtin_scene_into_the_current_directory() {
     let d = scratch("default");
     let out = run(&d, &[]);
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("merged area light 'Area'"), "{stdout}");
+    // Notices go to standard error, the summary line to standard output.
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("merged area light 'Area'") && !stdout.contains("merged area light"), "{stdout}{stderr}");
     let png = d.join("CBspheres_lambertian.png");
     assert!(png.exists(), "no image written; stdout: {stdout}");
     assert!(stdout.contains("wrote CBspheres_lambertian.png"), "{stdout}");
@@ -73,7 +75,7 @@ fn same_seed_same_image_at_any_thread_count() {
 }
 
 #[test]
-fn cell_is_a_crop_of_the_full_frame_and_writes_a_rate_image() {
+fn cell_is_a_crop_of_the_full_frame_and_no_rate_image_without_adaptive_sampling() {
     let d = scratch("cell");
     let full = render_exr(&d, "full", &["-r", "64", "48"]);
     // CS184 frame coordinates: y counts up from the bottom row.
@@ -86,7 +88,7 @@ fn cell_is_a_crop_of_the_full_frame_and_writes_a_rate_image() {
             assert_eq!(cell.get(x, y), full.get(10 + x, 47 - (5 + 15 - y)), "pixel {x},{y}");
         }
     }
-    assert!(d.join("cell_rate.png").exists());
+    assert!(!d.join("cell_rate.png").exists(), "a rate image without -a");
 }
 
 #[test]
@@ -188,7 +190,7 @@ fn adaptive_batches_are_powers_of_two_with_sobol() {
     for (sampler, batch) in [("sobol", 64u64), ("independent", 48)] {
         let png = d.join(format!("{sampler}.png"));
         let out = run(&d, &["-s", "192", "-a", "48", "0.05", "-m", "1", "-r", "32", "24", "--sampler", sampler, "-f", png.to_str().unwrap()]);
-        let text = String::from_utf8_lossy(&out.stdout);
+        let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
         assert_eq!(text.contains("-a 48: Sobol samples are stratified in blocks of powers of two; checking every 64 samples"), sampler == "sobol", "{text}");
         let kept: u64 = text.split(" samples kept").next().unwrap().rsplit(' ').next().unwrap().parse().unwrap();
         assert!(kept > 0 && kept % batch == 0, "{sampler}: {kept} samples kept is not a multiple of {batch}");
@@ -348,7 +350,7 @@ fn environment_light_lights_an_unlit_scene_and_bad_maps_are_refused() {
     let unlit = unlit.to_str().unwrap();
     // Without -e: black, with one warning line saying there is no light.
     let out = run(&d, &[unlit, "-r", "32", "24", "--keep-fov", "-f", "black.png", "--exr", "black.exr"]);
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = String::from_utf8_lossy(&out.stderr);
     assert_eq!(text.lines().filter(|l| l.contains("warning")).count(), 1, "{text}");
     assert!(text.contains("no light"), "{text}");
     assert!(read_exr(&d.join("black.exr")).unwrap().pixels.iter().all(|p| *p == glam::Vec3::ZERO));
@@ -375,9 +377,9 @@ fn environment_light_lights_an_unlit_scene_and_bad_maps_are_refused() {
 
 #[test]
 fn shared_dwab_environment_maps_load() {
-    // The CC0 maps in ../shared/envmaps are DWAB-compressed (lossy, with a few
+    // The CC0 maps in scenes/envmaps are DWAB-compressed (lossy, with a few
     // negative texels from ringing, which we clamp to 0).
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/envmaps");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/envmaps");
     assert!(dir.join("studio.exr").exists(), "test data missing: {}", dir.display());
     for name in ["studio.exr", "courtyard.exr"] {
         let env = pathtracer::light::EnvMap::load(&dir.join(name)).unwrap_or_else(|e| panic!("{e}"));
@@ -385,4 +387,131 @@ fn shared_dwab_environment_maps_load() {
         assert!(env.texels.iter().all(|t| t.is_finite() && t.min_element() >= 0.0));
         assert!(!env.is_black());
     }
+}
+
+/// A run that must fail: its exit status, and its standard error after
+/// checking that it is one line, without a panic, hint or usage block.
+fn mistake(dir: &Path, args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).args(args).current_dir(dir).env("CI", "true").output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(!out.status.success(), "pathtracer {args:?} should have failed");
+    assert_eq!(err.trim_end().lines().count(), 1, "pathtracer {args:?}: not one line: {err}");
+    assert!(err.starts_with("pathtracer: error: "), "{err}");
+    for noise in ["panicked", "For more information", "tip:", "Usage:", "-- -1"] {
+        assert!(!err.contains(noise), "pathtracer {args:?}: '{noise}' in {err}");
+    }
+    assert_eq!(err.matches("--help").count(), err.contains("--help") as usize, "the hint twice: {err}");
+    (out.status.code().unwrap(), err)
+}
+
+#[test]
+fn each_command_line_mistake_gets_one_line_saying_what_is_accepted_and_exit_status_2() {
+    let d = scratch("mistakes");
+    let cases: &[(&[&str], &[&str])] = &[
+        (&["-s", "abc"], &["-s abc", "whole number"]),
+        (&["--backend", "foo"], &["--backend foo", "native", "embree4", "brute"]),
+        (&["-m", "-1"], &["-m -1", "0 or more"]),
+        (&["-s", "99999999999"], &["-s 99999999999", "too large"]),
+        (&["merg", "p0.ptp", "p1.ptp", "-f", "x.png"], &["'merg' is not a command", "did you mean 'merge'?"]),
+        (&["benhc"], &["did you mean 'bench'?"]),
+        (&["nothing"], &["'nothing' is neither a command", ".dae", ".obj", ".ply"]),
+        (&["--backnd", "native"], &["unknown option '--backnd'", "did you mean '--backend'?"]),
+        (&["--integrator", "nrmals"], &["--integrator nrmals", "did you mean 'normals'?"]),
+        (&["-r", "8"], &["-r", "2 values"]),
+        (&["-t", "0"], &["-t 0", "at least 1"]),
+        (&["-s", "0"], &["-s 0", "between 1 and"]),
+        (&["-f", "out.bmp"], &["out.bmp", "'.bmp'", ".png, .jpg or .jpeg"]),
+        (&["-f", "out"], &["no file extension", ".png, .jpg or .jpeg"]),
+        (&["--exr", "out.png"], &["--exr out.png", ".exr"]),
+        (&["--integrator", "normals", "-m", "3"], &["-m", "no effect"]),
+    ];
+    for (args, needles) in cases {
+        let (code, err) = mistake(&d, args);
+        assert_eq!(code, 2, "pathtracer {args:?}: {err}");
+        for n in *needles {
+            assert!(err.contains(n), "pathtracer {args:?}: '{n}' not in {err}");
+        }
+    }
+    assert!(std::fs::read_dir(&*d).unwrap().next().is_none(), "a refused command wrote a file");
+}
+
+#[test]
+fn a_scene_with_no_or_an_unknown_extension_is_answered_with_the_formats_read() {
+    let d = scratch("scene-ext");
+    let text = std::fs::read_to_string(common::scene_path("sky", "CBempty")).unwrap();
+    for name in ["noext", "scene.abc"] {
+        std::fs::write(d.join(name), &text).unwrap();
+        let (code, err) = mistake(&d, &[name, "-r", "8", "8"]);
+        assert_eq!(code, 1, "{err}");
+        assert!(err.contains(name) && err.contains(".dae") && err.contains(".obj") && err.contains(".ply"), "{err}");
+        assert!(!err.contains("''"), "{err}");
+    }
+}
+
+#[test]
+fn the_image_format_follows_the_extension_and_the_rate_image_only_adaptive_sampling() {
+    let d = scratch("formats");
+    let scene = common::scene_path("sky", "CBempty");
+    let scene = scene.to_str().unwrap();
+    run(&d, &[scene, "-r", "16", "12", "-f", "a.jpg"]);
+    run(&d, &[scene, "-r", "16", "12", "-f", "b.JPEG"]);
+    run(&d, &[scene, "-r", "16", "12", "-f", "c.png"]);
+    assert_eq!(image::ImageFormat::from_path(d.join("a.jpg")).unwrap(), image::ImageFormat::Jpeg);
+    assert_eq!(image::guess_format(&std::fs::read(d.join("a.jpg")).unwrap()).unwrap(), image::ImageFormat::Jpeg);
+    assert_eq!(image::guess_format(&std::fs::read(d.join("b.JPEG")).unwrap()).unwrap(), image::ImageFormat::Jpeg);
+    assert_eq!(image::guess_format(&std::fs::read(d.join("c.png")).unwrap()).unwrap(), image::ImageFormat::Png);
+    for name in ["a_rate.png", "b_rate.png", "c_rate.png"] {
+        assert!(!d.join(name).exists(), "{name} written without adaptive sampling");
+    }
+    run(&d, &[scene, "-r", "16", "12", "--integrator", "normals", "-f", "n.png"]);
+    assert!(!d.join("n_rate.png").exists(), "normal shading wrote a rate image");
+    run(&d, &[scene, "-r", "16", "12", "-s", "8", "-a", "2", "0.5", "-f", "ad.jpg"]);
+    assert!(d.join("ad.jpg").exists() && d.join("ad_rate.png").exists());
+}
+
+#[test]
+fn help_wraps_to_the_terminal_and_speaks_in_users_words() {
+    for cols in [80usize, 100] {
+        for args in [&["-h"][..], &["--help"], &["bench", "--help"], &["merge", "--help"], &["export", "--help"]] {
+            let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).args(args).env("COLUMNS", cols.to_string()).output().unwrap();
+            assert!(out.status.success());
+            let text = String::from_utf8_lossy(&out.stdout);
+            let wide: Vec<&str> = text.lines().filter(|l| l.chars().count() > cols).collect();
+            assert!(wide.is_empty(), "{args:?} at {cols} columns: {} lines wider: {wide:?}", wide.len());
+            assert!(!text.contains("::"), "{args:?} names a module: {text}");
+        }
+    }
+}
+
+#[test]
+fn the_man_pages_have_a_synopsis_examples_exit_status_and_environment() {
+    let d = scratch("man");
+    run(&d, &["man", "--out", "."]);
+    let root = std::fs::read_to_string(d.join("pathtracer.1")).unwrap();
+    for section in [".SH SYNOPSIS", ".SH EXAMPLES", ".SH \"EXIT STATUS\"", ".SH ENVIRONMENT", ".SH \"SEE ALSO\"", "pathtracer\\-merge"] {
+        let alt = section.replace('"', "");
+        assert!(root.contains(section) || root.contains(&alt), "pathtracer.1 lacks {section}");
+    }
+    let synopsis = root.split(".SH SYNOPSIS").nth(1).unwrap().split(".SH").next().unwrap();
+    assert!(synopsis.contains("OPTIONS") && synopsis.contains("SCENE") && synopsis.contains("COMMAND"), "{synopsis}");
+    assert!(!synopsis.contains("\\-t \\fR]"), "a flag without its value: {synopsis}");
+    let merge = std::fs::read_to_string(d.join("pathtracer-merge.1")).unwrap();
+    let title = merge.lines().find(|l| l.starts_with(".TH")).unwrap();
+    assert!(title.starts_with(".TH PATHTRACER-MERGE 1") && title.contains("pathtracer manual") && !title.contains('<'), "{title}");
+    let synopsis = merge.split(".SH SYNOPSIS").nth(1).unwrap().split(".SH").next().unwrap();
+    assert!(synopsis.contains("FILE") && synopsis.contains("PARTIAL"), "{synopsis}");
+    for code in ["\\fB0\\fR", "\\fB1\\fR", "\\fB2\\fR"] {
+        assert!(merge.contains(code), "exit status {code} missing from pathtracer-merge.1");
+    }
+    assert!(!root.contains(".SH EXTRA"));
+}
+
+#[test]
+fn version_names_the_commit_the_binary_was_built_from() {
+    let out = Command::new(env!("CARGO_BIN_EXE_pathtracer")).arg("--version").output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    let first = text.lines().next().unwrap();
+    assert!(first.contains("(commit ") || first.contains("(built outside git)"), "{first}");
+    let short = Command::new(env!("CARGO_BIN_EXE_pathtracer")).arg("-V").output().unwrap();
+    assert!(String::from_utf8_lossy(&short.stdout).contains(first.trim_start_matches("pathtracer ")), "-V and --version disagree");
 }

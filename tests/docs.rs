@@ -265,30 +265,45 @@ fn doc_commands(file: &Path) -> Vec<Vec<DocCommand>> {
     blocks.into_iter().filter(|b| !b.is_empty()).collect()
 }
 
+/// A fresh clone of the repository with nothing beside it: every file git
+/// tracks, as the working tree holds it, copied into an empty temporary
+/// folder (so an uncommitted change is tried as its commit will be).
+fn fresh_clone(tag: &str) -> PathBuf {
+    let out = Command::new("git").args(["ls-files", "-z", "--cached"]).current_dir(root()).output();
+    let out = out.unwrap_or_else(|e| panic!("git ls-files: {e} (the documentation tests need git to make a fresh clone)"));
+    assert!(out.status.success(), "git ls-files: {}", String::from_utf8_lossy(&out.stderr));
+    let base = std::env::temp_dir().join(format!("pt-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let clone = base.join("pathtracer");
+    let mut copied = 0;
+    for name in out.stdout.split(|&b| b == 0).filter(|n| !n.is_empty()) {
+        let rel = Path::new(std::str::from_utf8(name).unwrap());
+        let from = root().join(rel);
+        if !from.is_file() {
+            continue; // deleted in the working tree, not yet committed
+        }
+        let to = clone.join(rel);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(&from, &to).unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+        copied += 1;
+    }
+    assert!(copied > 100, "only {copied} tracked files: is this a git checkout?");
+    assert!(!base.join("shared").exists());
+    clone
+}
+
 /// The command at test size: frames of 40×30, at most 8 samples, bench on
-/// 8192 rays of small scenes, files of the repository found from a scratch
-/// folder, and the help text's placeholder names bound to shipped files.
+/// 8192 rays of small scenes, and the help text's placeholder names bound
+/// to files of the clone. Paths in the documentation stay as written: the
+/// commands run from the clone's root, as the README says.
 fn small(args: &[String]) -> Vec<String> {
-    let shared = root().join("../shared");
     let bind = |a: &str| -> String {
-        let placeholder = match a {
-            "scene.dae" => Some(root().join("scenes/CBempty.dae")),
-            "bunny_unlit.dae" => Some(shared.join("scenes/cs184/sky/bunny_unlit.dae")),
-            "studio.exr" => Some(shared.join("envmaps/studio.exr")),
-            _ => None,
-        };
-        if let Some(p) = placeholder {
-            return p.display().to_string();
+        match a {
+            "scene.dae" => "scenes/cs184/sky/CBempty.dae".into(),
+            "bunny_unlit.dae" => "scenes/cs184/sky/bunny_unlit.dae".into(),
+            "studio.exr" => "scenes/envmaps/studio.exr".into(),
+            _ => a.to_string(),
         }
-        if let Some(rest) = a.strip_prefix("../shared/") {
-            return shared.join(rest).display().to_string();
-        }
-        for dir in ["scenes/", "validation/", "docs/", "tests/"] {
-            if a.starts_with(dir) {
-                return root().join(a).display().to_string();
-            }
-        }
-        a.to_string()
     };
     let mut a: Vec<String> = args.iter().map(|x| bind(x)).collect();
     if a.is_empty() {
@@ -340,17 +355,28 @@ fn small(args: &[String]) -> Vec<String> {
     a
 }
 
+/// The entries of a folder, sorted.
+fn entries(dir: &Path) -> BTreeSet<PathBuf> {
+    std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect()
+}
+
+/// Every documented command runs in a fresh clone of the repository with
+/// nothing beside it, from the clone's root; each code block's outputs are
+/// removed before the next block runs, so no block lives off another's.
 #[test]
-fn every_documented_command_runs() {
+fn every_documented_command_runs_from_a_fresh_clone() {
     let exe = env!("CARGO_BIN_EXE_pathtracer");
-    let scratch = std::env::temp_dir().join(format!("pt-doc-commands-{}", std::process::id()));
+    let clone = fresh_clone("doc-commands");
+    let pristine = entries(&clone);
     use pathtracer::accel::embree::{available, Major};
     let mut ran = 0;
     let mut failures = Vec::new();
     for file in markdown_files() {
-        for (b, block) in doc_commands(&file).into_iter().enumerate() {
-            let dir = scratch.join(format!("{}-{b}", file.file_stem().unwrap().to_string_lossy()));
-            std::fs::create_dir_all(&dir).unwrap();
+        for block in doc_commands(&file) {
+            for new in entries(&clone).difference(&pristine) {
+                if new.is_dir() { std::fs::remove_dir_all(new).unwrap() } else { std::fs::remove_file(new).unwrap() }
+            }
+            let dir = &clone;
             for c in block {
                 let missing = c.args.iter().any(|a| match a.as_str() {
                     "embree3" | "embree3-high" => !available(Major::V3),
@@ -363,7 +389,7 @@ fn every_documented_command_runs() {
                     continue;
                 }
                 let args = small(&c.args);
-                let out = Command::new(exe).args(&args).envs(c.env.iter().map(|(k, v)| (k, v))).env("CI", "true").current_dir(&dir).output().unwrap();
+                let out = Command::new(exe).args(&args).envs(c.env.iter().map(|(k, v)| (k, v))).env("CI", "true").env_remove("PATHTRACER_SCENES").current_dir(dir).output().unwrap();
                 ran += 1;
                 if !out.status.success() {
                     failures.push(format!(
@@ -378,7 +404,7 @@ fn every_documented_command_runs() {
             }
         }
     }
-    let _ = std::fs::remove_dir_all(&scratch);
+    let _ = std::fs::remove_dir_all(clone.parent().unwrap());
     assert!(ran >= 30, "only {ran} documented commands found: is the extractor broken?");
     assert!(failures.is_empty(), "{} of {ran} documented commands failed:\n{}", failures.len(), failures.join("\n"));
     eprintln!("{ran} documented commands ran");

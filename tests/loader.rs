@@ -104,7 +104,7 @@ fn expect_failure(dir: &Path, scene: &Path, expect: &str) {
 }
 
 fn corrupt(dir: &Path, file: &str, edit: impl Fn(String) -> String) -> PathBuf {
-    let src = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/CBspheres_lambertian.dae")).unwrap();
+    let src = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cs184/sky/CBspheres_lambertian.dae")).unwrap();
     let edited = edit(src.clone());
     assert_ne!(edited, src, "the corruption for {file} changed nothing");
     let p = dir.join(file);

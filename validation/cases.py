@@ -19,10 +19,10 @@ def radiance(scene, m, refs, flags=(), label=None, spp_scale=1, ref_shift=None, 
 
 
 def envmap(name):
-    """An environment map from ../shared/envmaps (CC0, see its SOURCE.md); missing data stops the run."""
-    p = os.path.join(ROOT, "..", "shared", "envmaps", name)
+    """An environment map from scenes/envmaps (CC0, see scenes/README.md); missing data stops the run."""
+    p = os.path.join(ROOT, "scenes", "envmaps", name)
     if not os.path.exists(p):
-        sys.exit(f"run_cases: environment map {p} not found (../shared/envmaps)")
+        sys.exit(f"run_cases: environment map {p} not found (scenes/envmaps)")
     return os.path.abspath(p)
 
 
@@ -130,8 +130,8 @@ def own_scene_cases(path, m, refs, scene_flags=()):
 def find_scene(name):
     if os.path.isabs(name) and os.path.exists(name):
         return name
-    for d in [os.path.join(ROOT, "scenes"), os.path.join(HERE, "scenes"), os.path.join(ROOT, "..", "shared", "scenes", "cs184", "sky")]:
+    for d in [os.path.join(ROOT, "scenes", "cs184", "sky"), os.path.join(HERE, "scenes")]:
         p = os.path.join(d, name)
         if os.path.exists(p):
             return p
-    sys.exit(f"run_cases: scene {name} not found (looked in scenes/, validation/scenes/ and ../shared/scenes/cs184/sky)")
+    sys.exit(f"run_cases: scene {name} not found (looked in scenes/cs184/sky and validation/scenes)")

@@ -4,21 +4,22 @@ independent renders (one EXR each; the harness takes their mean and variance).
 Run by Blender's own Python, which has no numpy:
   blender -b --factory-startup --python-exit-code 1 -P cycles_ref.py -- SCENE_DIR --mode M ...
 
-Conventions (../shared/notes/references.md, measured on this machine kind with Blender 3.4.1):
+Conventions (docs/validation/README.md, measured with Blender 3.4.1):
 an empty scene and a black world; CPU, fixed threads, no adaptive sampling, no denoising, no
 clamping, no light threshold, no guiding; a box pixel filter one pixel wide; bounces
 = our -m minus 1 for every ray type; Standard view transform; float32 linear EXR. Camera from
 our camera frame with the horizontal field of view. Diffuse BSDF with roughness 0 (Lambert).
 
-Emitters: Cycles 3.4 is biased low near the plane of an emissive *mesh* (references.md,
-pitfall 3), so an emissive rectangle becomes an AREA lamp (power 4·L·A, one-sided like ours)
+Emitters: Cycles 3.4 is biased low near the plane of an emissive *mesh* (measured: a wall
+near the light's plane reads up to 5 % dark, the same with every sampling option; an AREA lamp
+of the same size is exact), so an emissive rectangle becomes an AREA lamp (power 4·L·A, one-sided like ours)
 plus a black stand-in quad just behind it that shows the emission to camera rays only and
 occludes like the emitter. Any other emissive shape is refused, not approximated. Point lamps
 have power 4π·I and radius 0; our directional light is a SUN lamp of angle 0 with strength =
 irradiance; our hemisphere light is a world shader that is L above the horizon (y > 0) and
 black below. Spheres are exact spheres (a one-point cloud of that radius).
 
-Materials (../shared/notes/cs184-3-2.md section 3.2): mirror = Glossy BSDF, Sharp (two-sided,
+Materials: mirror = Glossy BSDF, Sharp (two-sided,
 weight exactly the colour); CS184's refraction = Refraction BSDF, Sharp (no Fresnel, total
 internal reflection ends the path, as ours); glass = Mix Shader(Fac = Fresnel node with the
 ior, Refraction Sharp × transmittance, Glossy Sharp × reflectance): exact Fresnel (the node
@@ -511,7 +512,7 @@ def main():
     w, h = build(spec, args.scene, args.mode)
     configure(w, h, args.mode, args.max_depth, args.threads)
     meta = {"renderer": f"cycles (blender {bpy.app.version_string})", "mode": args.mode, "spp_per_render": args.spp, "renders": [], "ladder": []}
-    # The first render of a session pays one-time costs (kernel and image set-up): one
+    # The first render in a Blender process pays one-time costs (kernel and image set-up): one
     # untimed 1-spp render first, so neither the renders nor the ladder carry them.
     render(f"{args.out}_warmup.exr", 1, 0)
     os.remove(f"{args.out}_warmup.exr")

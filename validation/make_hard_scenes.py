@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Write the numerical-stability scenes of the validation harness into validation/scenes/,
-all derived from scenes/CBspheres_lambertian.dae (the built-in scene), so that every
+all derived from scenes/cs184/sky/CBspheres_lambertian.dae (the built-in scene), so that every
 reference renders exactly what our loader makes of them:
 
   hard_offset.dae   the whole scene (camera and lights too) moved by 8192 along every axis:

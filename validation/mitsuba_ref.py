@@ -3,13 +3,13 @@
 Mitsuba 3 (scalar_rgb), as R independent renders whose per-pixel mean and variance of the
 mean are written as OpenEXR.
 
-Conventions (../shared/notes/references.md, measured): perspective sensor with the horizontal
+Conventions (docs/validation/README.md, measured): perspective sensor with the horizontal
 field of view, box pixel filter, linear float RGB film, `path` integrator with
 max_depth = our -m + 1 (Mitsuba counts emitter hits as a depth), diffuse BSDFs wrapped in
 `twosided` (ours reflect from both sides), area emitters one-sided along the geometric normal
 (ours too). Anything Mitsuba cannot represent exactly is refused, never approximated.
 
-Materials (../shared/notes/cs184-3-2.md section 3.1): mirror = `twosided` `conductor` with
+Materials: mirror = `twosided` `conductor` with
 material "none" (a 100 % reflector) times the reflectance, exact; glass = `dielectric` with
 int_ior = ior and ext_ior = 1.0 (Mitsuba's default is air, 1.000277), exact Fresnel and the
 same (eta_i/eta_t)^2 radiance scaling as ours, exact; microfacet = `roughconductor` Beckmann

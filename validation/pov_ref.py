@@ -6,13 +6,13 @@
 * `radiance`: direct lighting (our -m 1) from point lights and emissive rectangles, as
   independent renders (--renders K) for the harness's statistics. POV-Ray has no seed, so
   the randomness is ours: each render places the rectangle's N×N lightlets (cosine
-  spotlights, references.md) jittered in their strata with its own seed, and shifts the
+  spotlights, docs/validation/README.md) jittered in their strata with its own seed, and shifts the
   whole camera grid by a random sub-pixel offset while rendering S×S rays per pixel (one
   ray per sub-pixel, no POV-Ray anti-aliasing) that the harness box-averages: a randomly
   shifted stratified estimate of the box-filtered pixel. Each render is thus an unbiased
   estimate of the direct-lighting image, up to POV-Ray's half-float output.
 
-Conventions (../shared/notes/references.md, measured): `#version 3.7`, assumed_gamma 1,
+Conventions (docs/validation/README.md, measured): `#version 3.7`, assumed_gamma 1,
 no ambient; objects finish { emission 1 diffuse 0 } so the pixel is the pigment; OpenEXR
 output (+FE), which POV-Ray writes as *half* floats (11-bit mantissa: the harness allows
 2^-11 relative for depth; the id colours are multiples of 1/8, exact in half). The camera is
@@ -112,7 +112,7 @@ FADE = 1e-3  # fade_distance: fade = 2/(1+(d/FADE)^2) = 2·FADE²/d² to a relat
 
 
 def radiance_lights(spec, folder, n, rng):
-    """Point lights and emissive rectangles as POV-Ray lights (references.md, measured): a
+    """Point lights and emissive rectangles as POV-Ray lights (measured): a
     light of colour C gives pigment·cosθ·C·fade, so intensity I becomes colour I/(2π·FADE²);
     a rectangle of radiance L and area A becomes n×n cosine spotlights of colour
     L·A/(2π·FADE²·n²) at jittered stratified points, plus a no_shadow polygon that shows L

@@ -40,6 +40,7 @@ from images import read_exr, to_png, write_png, write_zmap  # noqa: E402
 from metrics import equal_time_ratio, flip_error, from_renders, interp_loglog, ladder_curve, rel_mse  # noqa: E402
 from report import write_report  # noqa: E402
 from geometry_checks import geometry_vs_cycles, geometry_vs_pov  # noqa: E402
+from provenance import provenance  # noqa: E402
 def normalise_export(src, dst):
     """A copy of an exported scene moved and scaled into the references' comfort zone: moved
     by a multiple of 1024 (and of 4 extents) towards the origin, then scaled by a power of two to a size of
@@ -360,7 +361,7 @@ class Harness:
         # test sees a +0.2 % systematic of both references at 64x48 that lives in
         # the 14 pixels straddling the light's edge (Cycles +0.98 % there, the rest
         # +0.025 %; our -H and light-sampling estimates agree to 0.03 %): pixel
-        # footprint, not light transport — open in issue 13's note.
+        # footprint, not light transport; not yet explained.
         sampler = ["--sampler", "independent"]
         a_flags = ["-a", str(case["batch"]), str(case["tol"]), *sampler]
         refs = {r: self.getref(r, ref_dir, key, case["m"]) for r in case["refs"]}
@@ -493,21 +494,6 @@ class Harness:
             shutil.rmtree(folder)
         os.makedirs(folder)
         return folder
-
-
-def provenance():
-    """When, at which commit and on which CPU a run was made (for the documentation's tables)."""
-    git = lambda *a: subprocess.run(["git", "-C", ROOT, *a], capture_output=True, text=True)
-    commit = git("rev-parse", "--short", "HEAD").stdout.strip() or "?"
-    if git("diff", "--quiet", "HEAD", "--", "src", "native", "build.rs", "Cargo.toml").returncode != 0:
-        commit += "+local changes"
-    cpu = "?"
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((l.split(":", 1)[1].strip() for l in f if l.startswith("model name")), "?")
-    except OSError:
-        pass
-    return {"date": time.strftime("%Y-%m-%d"), "commit": commit, "cpu": f"{os.cpu_count()}-vCPU {cpu}"}
 
 
 def main():

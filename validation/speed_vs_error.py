@@ -101,13 +101,35 @@ def headline_table(rows, meta, goal=0.5):
     cases = list(dict.fromkeys(r["case"] for r in rows if not r["hemisphere"]))
     worst = lambda r: max(x for x in r["ratios"] if x is not None) if any(x is not None for x in r["ratios"]) else None
     cell = lambda case, ref: next((f"{worst(r):.2f}" for r in rows if r["case"] == case and r["backend"] == "native" and r["reference"] == ref and worst(r) is not None), "–")
-    out = [f"Equal-time relMSE, ours (native backend) ÷ reference, below 1 is better; the worse of {meta['runs']} {meta['tier']}-tier runs, "
-           f"{meta['date']}, renderer at {meta['commit']}, {meta['cpu']} (`validation/speed_vs_error.py`):", "",
-           "| case | ÷ Cycles 3.4 | ÷ Mitsuba 3 |", "|---|---:|---:|"]
-    out += [f"| {c} | {cell(c, 'cycles')} | {cell(c, 'mitsuba')} |" for c in cases]
+    out = [f"Equal-time relMSE, ours (native backend) ÷ reference, below 1 is better; the worse of {meta['runs']} {meta['tier']}-tier runs "
+           f"(`validation/speed_vs_error.py`). {provenance_line(meta)}", "",
+           "| case | integrator | ÷ Cycles 3.4 | ÷ Mitsuba 3 |", "|---|---|---:|---:|"]
+    out += [f"| {case_name(c)} | {integrator(c)} | {cell(c, 'cycles')} | {cell(c, 'mitsuba')} |" for c in cases]
     rated = [r for r in rows if not r["hemisphere"] and worst(r) is not None]
     out += ["", f"{sum(1 for r in rated if worst(r) <= goal)} of {len(rated)} rows (both backends) at or below {goal} in every run."]
     return "\n".join(out)
+
+
+def provenance_line(meta):
+    """The sentence every generated table carries (validation/provenance.py)."""
+    return f"Measured {meta['date']} at commit {meta['commit']} on {meta['cpu']}."
+
+
+BDPT_TAGS = {"_specular_bdpt": "BDPT, specular light paths", "_light_bdpt": "light tracing", "_lens_bdpt": "BDPT", "_env_bdpt": "BDPT", "_bdpt": "BDPT"}
+
+
+def integrator(case):
+    """The integrator a case's tag names (the path tracer without one)."""
+    return next((name for tag, name in BDPT_TAGS.items() if case.endswith(tag)), "path")
+
+
+def case_name(case):
+    """The case without its integrator tag (the lens and environment tags stay as words)."""
+    for tag in BDPT_TAGS:
+        if case.endswith(tag):
+            rest = case[: -len(tag)]
+            return rest + {"_lens_bdpt": "_lens", "_env_bdpt": "_env"}.get(tag, "")
+    return case
 
 
 def paste(path, name, text):
@@ -217,8 +239,8 @@ def main():
     if args.csv:
         write_csv(args.csv, rows, meta)
     if args.paste:
-        intro = (f"{meta['runs']} {meta['tier']}-tier runs, {meta['date']}, renderer at {meta['commit']}, {meta['cpu']}; "
-                 "equal-time relMSE ratio ours ÷ reference (below 0.5 is the goal; `-H` rows are the naive estimator on purpose), "
+        intro = (f"{meta['runs']} {meta['tier']}-tier runs. {provenance_line(meta)} "
+                 "Equal-time relMSE ratio ours ÷ reference (below 0.5 is the goal; `-H` rows are the naive estimator on purpose), "
                  "with the fixed and per-spp costs of the last run (`validation/speed_vs_error.py`):")
         paste(os.path.join(ROOT, "docs", "validation", "speed-vs-error.md"), "speed-vs-error", intro + "\n\n" + table)
         paste(os.path.join(ROOT, "README.md"), "speed-vs-error", headline_table(rows, meta))

@@ -1,4 +1,4 @@
-"""Statistical verdicts for an image against a reference (../shared/notes/validation.md §5).
+"""Statistical verdicts for an image against a reference (docs/validation/README.md, Verdicts).
 
 * Per pixel-channel Welch z: z = (x - r) / sqrt(var_x + var_r), both variances of the mean.
   Family-wise alpha 0.01, Šidák-corrected over all pixel-channels; the image passes when at

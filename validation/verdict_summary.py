@@ -19,8 +19,8 @@ def summarize(s):
     refused = sorted({(r["case"], r["reference"]) for r in s["results"] if r.get("refused") and r.get("kind") == "radiance"})
     refs = list(dict.fromkeys(r["reference"] for r in results))
     backends = [b for b in s.get("backends", []) if any(r.get("backend") == b for r in results)]
-    out = [f"The harness's {s['tier']} tier, {s.get('date', '?')}, renderer at {s.get('commit', '?')}, {s.get('cpu', '?')} "
-           f"(`validation/run {s['tier']}`, summarised by `validation/verdict_summary.py`): comparisons passed of those made.", ""]
+    out = [f"The harness's {s['tier']} tier (`validation/run {s['tier']}`, summarised by `validation/verdict_summary.py`): "
+           f"comparisons passed of those made. Measured {s.get('date', '?')} at commit {s.get('commit', '?')} on {s.get('cpu', '?')}.", ""]
     out += ["| reference | " + " | ".join(backends) + " |", "|---|" + "---:|" * len(backends)]
     for ref in refs:
         cells = []

@@ -32,9 +32,9 @@ use tables::{ratio_table, scaling_table};
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     /// Scene files (.dae, .obj, .ply) or names (cow, maxplanck, CBbunny, ...
-    /// found in scenes/ or ../shared/scenes/cs184), or generated scenes of N
+    /// found in scenes/cs184 under the current folder), or generated scenes of N
     /// triangles: sphere:N, arch:N, grass:N, stadium:N, subdiv:NAME:N (see
-    /// `bench::scenes`). Default: cow maxplanck CBbunny beetle sphere:1M
+    /// docs/benchmarks/README.md). Default: cow maxplanck CBbunny beetle sphere:1M
     /// sphere:5M arch:2M grass:2M stadium:2M subdiv:bunny:1.5M arch:10M.
     pub scenes: Vec<String>,
     /// Backends to time [default: native, embree3, embree3-high, embree4,
@@ -58,7 +58,7 @@ pub struct BenchArgs {
     pub passes: usize,
     /// Only the build and throughput tables: no SAH statistics (a child run
     /// that builds the scene again), no Embree batch-call table, no renders.
-    /// For thread-scaling runs on a borrowed machine, where minutes count
+    /// For thread-scaling runs on a machine where minutes count.
     #[arg(long)]
     pub throughput_only: bool,
     /// Thread counts to time throughput at, e.g. 1,2,4,8,16 [default: 1 and
@@ -97,11 +97,8 @@ pub fn scene_dirs() -> Vec<PathBuf> {
     if let Some(d) = std::env::var_os("PATHTRACER_SCENES") {
         dirs.push(PathBuf::from(d));
     }
-    for base in [PathBuf::from("."), PathBuf::from(env!("CARGO_MANIFEST_DIR"))] {
-        dirs.push(base.join("scenes"));
-        for sub in ["sky", "meshedit", "simple"] {
-            dirs.push(base.join("../shared/scenes/cs184").join(sub));
-        }
+    for sub in ["sky", "meshedit", "simple"] {
+        dirs.push(Path::new("scenes/cs184").join(sub));
     }
     dirs
 }
@@ -118,7 +115,7 @@ pub fn find_scene(name: &str) -> Result<PathBuf> {
         .into_iter()
         .map(|d| d.join(&file))
         .find(|p| p.exists())
-        .ok_or_else(|| Error::new(format!("{name}: scene not found (looked in ./scenes, ../shared/scenes/cs184 and $PATHTRACER_SCENES)")))
+        .ok_or_else(|| Error::new(format!("{name}: scene not found (looked in $PATHTRACER_SCENES and scenes/cs184/{{sky,meshedit,simple}} under the current folder)")))
 }
 
 /// A closed lat-long unit sphere with `2 * segments * rings` triangles

@@ -1,7 +1,7 @@
 //! The benchmark's derived tables: native ÷ another contender per scene, ray
 //! kind and thread count, and throughput against thread count. Both are
 //! read off the same run's samples, so every ratio compares speeds measured
-//! minutes apart on the same machine, never across sessions.
+//! minutes apart on the same machine, never across runs.
 
 use super::Contender;
 use crate::accel::BackendKind;

@@ -7,17 +7,40 @@ use std::path::PathBuf;
 /// The examples at the end of `--help` (and of the man page).
 pub const EXAMPLES: &str = "\
 Examples:
-  pathtracer                                    render the built-in Cornell box (16 spp, -m 5)
+  pathtracer
+      Render the built-in Cornell box (16 samples per pixel, -m 5).
   pathtracer scene.dae -t 8 -s 64 -l 4 -m 5 -r 480 360 -f out.png
-  pathtracer scene.dae -s 256 -b 0.05 -d 4.5    depth of field (thin lens)
+      A CS184 render: 8 threads, 64 samples per pixel, 5 bounces.
+  pathtracer scene.dae -s 256 -b 0.05 -d 4.5
+      Depth of field through a thin lens.
   pathtracer bunny_unlit.dae -e studio.exr -s 64 -m 5
-  pathtracer scene.dae -s 1024 -a 64 0.05 -m 5 -f out.png   adaptive sampling (and out_rate.png)
-  pathtracer scene.dae --integrator normals     CS184's normal shading
-  pathtracer scene.dae --backend embree         same image, Embree's traversal
-  pathtracer scene.dae -s 256 --part 0/2 --partial p0.ptp   half of a split render...
-  pathtracer scene.dae -s 256 --part 1/2 --partial p1.ptp   ...the other half
-  pathtracer merge p0.ptp p1.ptp -f out.png     both merged: the one-machine image, byte for byte
-  pathtracer bench cow CBbunny                  BVH build and ray throughput per backend";
+      Lit by an environment map.
+  pathtracer scene.dae -s 1024 -a 64 0.05 -m 5 -f out.png
+      Adaptive sampling; also writes out_rate.png.
+  pathtracer scene.dae --integrator normals
+      CS184's normal shading.
+  pathtracer scene.dae --backend embree
+      The same image through Embree's traversal.
+  pathtracer scene.dae -s 256 --part 0/2 --partial p0.ptp
+  pathtracer scene.dae -s 256 --part 1/2 --partial p1.ptp
+  pathtracer merge p0.ptp p1.ptp -f out.png
+      A render split in two, merged into the one-machine image, byte for byte.
+  pathtracer bench cow CBbunny
+      BVH build time and ray throughput per backend.";
+
+/// A whole number of 0 or more, answered in one line when it is not one
+/// (clap's own parsers would say "-1 is not in 0..=4294967295").
+fn whole<T: TryFrom<u64>>(s: &str) -> Result<T, String> {
+    use std::num::IntErrorKind;
+    if s.trim_start().starts_with('-') {
+        return Err("expected a whole number of 0 or more".into());
+    }
+    match s.trim().parse::<u64>() {
+        Ok(v) => T::try_from(v).map_err(|_| "the number is too large".into()),
+        Err(e) if *e.kind() == IntErrorKind::PosOverflow => Err("the number is too large".into()),
+        Err(_) => Err("expected a whole number".into()),
+    }
+}
 
 #[derive(Parser, Debug)]
 #[command(
@@ -59,7 +82,9 @@ pub enum Command {
         /// The partials, one per part, in any order
         #[arg(required = true, value_name = "PARTIAL")]
         partials: Vec<PathBuf>,
-        /// Output PNG, and its sample-rate image FILE_rate.png (FILE without its extension)
+        /// Output image, PNG or JPEG by its extension (.png, .jpg, .jpeg);
+        /// where the parts ran adaptive sampling (-a) also its sample-rate
+        /// image FILE_rate.png (FILE without its extension)
         #[arg(short = 'f', value_name = "FILE", required = true)]
         output: PathBuf,
         /// Also write the linear radiance as OpenEXR
@@ -136,22 +161,22 @@ pub struct RenderArgs {
     /// CS184's camera placement looking along -z with no clipping planes.
     /// Without a file, the built-in CBspheres_lambertian is rendered.
     pub scene: Option<PathBuf>,
-    /// Render threads [default: all cores]
-    #[arg(help_heading = "CS184 flags", short = 't', value_name = "N")]
+    /// Render threads, at least 1 [default: all cores]
+    #[arg(help_heading = "CS184 flags", short = 't', allow_negative_numbers = true, value_parser = whole::<usize>, value_name = "N")]
     pub threads: Option<usize>,
     /// Camera rays per pixel (the maximum with -a) [default: 1]
-    #[arg(help_heading = "CS184 flags", short = 's', value_name = "N")]
+    #[arg(help_heading = "CS184 flags", short = 's', allow_negative_numbers = true, value_parser = whole::<u32>, value_name = "N")]
     pub spp: Option<u32>,
     /// Samples per area light; with several lights and --light-pick one,
     /// light samples per vertex, each picking one light [default: 1]
-    #[arg(help_heading = "CS184 flags", short = 'l', value_name = "N")]
+    #[arg(help_heading = "CS184 flags", short = 'l', allow_negative_numbers = true, value_parser = whole::<u32>, value_name = "N")]
     pub light_samples: Option<u32>,
     /// Maximum ray depth [default: 1]
-    #[arg(help_heading = "CS184 flags", short = 'm', value_name = "N")]
+    #[arg(help_heading = "CS184 flags", short = 'm', allow_negative_numbers = true, value_parser = whole::<u32>, value_name = "N")]
     pub max_depth: Option<u32>,
     /// 1: accumulate bounces 0..m; 0: output only bounce m [default: 1]
-    #[arg(help_heading = "CS184 flags", short = 'o', value_name = "0|1")]
-    pub accumulate: Option<i64>,
+    #[arg(help_heading = "CS184 flags", short = 'o', allow_negative_numbers = true, value_parser = whole::<u32>, value_name = "0|1")]
+    pub accumulate: Option<u32>,
     /// Uniform hemisphere sampling for direct light instead of light sampling
     #[arg(help_heading = "CS184 flags", short = 'H')]
     pub hemisphere: bool,
@@ -164,7 +189,9 @@ pub struct RenderArgs {
     /// With -r: scale the 800x600 view to the new size instead of cropping it
     #[arg(help_heading = "Output", long, requires = "resolution")]
     pub keep_fov: bool,
-    /// Output PNG, and its sample-rate image FILE_rate.png (FILE without its extension) [default: ./SCENE.png]
+    /// Output image, PNG or JPEG by its extension (.png, .jpg, .jpeg); with
+    /// -a also its sample-rate image FILE_rate.png (FILE without its
+    /// extension) [default: ./SCENE.png]
     #[arg(help_heading = "CS184 flags", short = 'f', value_name = "FILE")]
     pub output: Option<PathBuf>,
     /// Load a CS184 camera settings file
@@ -208,7 +235,7 @@ pub struct RenderArgs {
     #[arg(help_heading = "Light transport", long, requires = "adaptive")]
     pub adaptive_pilot: bool,
     /// Seed of the per-pixel sample draws
-    #[arg(help_heading = "Light transport", long, default_value_t = 0)]
+    #[arg(help_heading = "Light transport", long, allow_negative_numbers = true, value_parser = whole::<u64>, default_value_t = 0)]
     pub seed: u64,
     /// Where each sample's random numbers come from: Owen-scrambled Sobol
     /// points (stratified) or independent uniform numbers
@@ -224,10 +251,10 @@ pub struct RenderArgs {
     #[arg(help_heading = "Light transport", long, value_enum, default_value_t = SkySamplingArg::Lune)]
     pub sky_sampling: SkySamplingArg,
     /// How the environment map (-e) is sampled at reflecting vertices: by
-    /// the map times a bound of the receiver's cosine (`light::env_product`)
-    /// and, at glossy vertices of α ≤ 0.1, inside the lobe's cone
-    /// (`light::env_lobe`); or for A/B comparisons by the cosine bound
-    /// everywhere, or by the map alone (Cycles' and Mitsuba's way)
+    /// the map times a bound of the receiver's cosine and, at glossy
+    /// vertices of α ≤ 0.1, inside the lobe's cone; or for A/B comparisons
+    /// by the cosine bound everywhere, or by the map alone (Cycles' and
+    /// Mitsuba's way)
     #[arg(help_heading = "Light transport", long, value_enum, default_value_t = EnvSamplingArg::Product)]
     pub env_sampling: EnvSamplingArg,
     /// Share of a diffuse surface's bounce rays aimed at the scene's mirror,
@@ -235,11 +262,10 @@ pub struct RenderArgs {
     /// mixture with the cosine lobe, weighted by its pdf: unbiased), so that
     /// caustics through them are found more often; 0 for the cosine lobe
     /// alone (CS184's, Cycles' and Mitsuba's way). Up to 16 objects
-    /// (`render::path::specular_guide`)
-    #[arg(help_heading = "Light transport", long, value_name = "FRACTION", default_value_t = crate::render::path::specular_guide::DEFAULT_FRACTION)]
+    #[arg(help_heading = "Light transport", long, value_name = "FRACTION", allow_negative_numbers = true, default_value_t = crate::render::path::specular_guide::DEFAULT_FRACTION)]
     pub specular_guide: f32,
     /// With several lights: each light sample picks one, in proportion to
-    /// an estimate of what each sends to the vertex (`light::pick`), or
+    /// an estimate of what each sends to the vertex, or
     /// every light is sampled at every vertex. Scenes with an environment
     /// map, the hemisphere light, a non-rectangular emissive mesh or more
     /// than 8 lights always sample every light

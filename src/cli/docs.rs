@@ -17,7 +17,7 @@ pub fn long_version() -> String {
     let newest = embree::newest().map_or("none".to_string(), |m| format!("embree{}", m.number()));
     format!(
         "{}\nbackends: native ({}), brute\n{}\n(embree = {newest})\npeers built in: {}",
-        env!("CARGO_PKG_VERSION"),
+        super::version_line(),
         crate::accel::wide::simd_level(crate::accel::NativeOptions::from_env().map(|o| o.isa).unwrap_or_default()),
         embree.join("\n"),
         if cfg!(feature = "peers") { "obvhs, tinybvh (bench only)" } else { "none (build with --features peers)" }
@@ -33,7 +33,7 @@ pub fn command_for<T: AsRef<std::ffi::OsStr>>(args: &[T]) -> clap::Command {
     if asks {
         command()
     } else {
-        reference_command().version(env!("CARGO_PKG_VERSION"))
+        reference_command().version(super::version_line())
     }
 }
 
@@ -42,7 +42,7 @@ pub fn command_for<T: AsRef<std::ffi::OsStr>>(args: &[T]) -> clap::Command {
 pub fn command() -> clap::Command {
     let newest = crate::accel::embree::newest()
         .map_or("no Embree loads here".to_string(), |m| format!("here: {}", crate::accel::embree::version_string(m)));
-    reference_command().long_version(long_version()).mut_arg("backend", |a| {
+    reference_command().version(super::version_line()).long_version(long_version()).mut_arg("backend", |a| {
         let help = a.get_help().map(|h| h.to_string()).unwrap_or_default();
         a.help(format!("{help} [embree = the newest Embree, {newest}]"))
     })
@@ -59,20 +59,123 @@ pub fn completions(shell: clap_complete::Shell, out: &mut dyn std::io::Write) {
     clap_complete::generate(shell, &mut command(), "pathtracer", out);
 }
 
+/// What each exit status means (the man pages' EXIT STATUS, the
+/// reference's "Exit status").
+pub const EXIT_STATUS: [(u8, &str); 3] = [
+    (0, "Success: the images, partials or tables were written (verify: every partial is intact)."),
+    (1, "The work failed: a file is missing, damaged or unsupported, a render or write failed, or (verify) a partial is damaged. One line on standard error names the file and the problem; nothing partial is left behind."),
+    (2, "The command line is wrong: an unknown command or option, a missing or malformed value, a value out of range, or flags that do not go together. One line on standard error says what is accepted."),
+];
+
+/// The environment variables the program reads when it runs (the build's
+/// and the tests' are in docs/reference/environment.md).
+pub const ENVIRONMENT: [(&str, &str); 6] = [
+    ("PATHTRACER_NATIVE_ISA", "sse, avx2 or avx512: the SIMD level of the native backend's kernels (default: avx2 where the CPU has it)."),
+    ("PATHTRACER_NATIVE_SPLITS", "a number from 0 to 4: spatial splits in the native BVH build, extra references per primitive allowed (default 0)."),
+    ("PATHTRACER_NATIVE_SHADOW", "packets, streams or timed: how the native backend traces coherent shadow batches (default timed)."),
+    ("PATHTRACER_EMBREE_CONFIG", "an Embree device configuration string, appended to every Embree device's (verbose=2 prints Embree's build statistics)."),
+    ("PATHTRACER_SCENES", "a folder where bench looks for scenes given by name, before scenes/cs184 under the current folder."),
+    ("CI", "set to anything: no progress bar (as when standard error is not a terminal)."),
+];
+
+/// Text as roff: backslashes and hyphens escaped, no line starting with a
+/// control character.
+fn roff(text: &str) -> String {
+    let t = text.replace('\\', "\\e").replace('-', "\\-");
+    t.lines().map(|l| if l.starts_with(['.', '\'']) { format!("\\&{l}") } else { l.to_string() }).collect::<Vec<_>>().join("\n")
+}
+
+/// One man page: clap's name, description, options and commands, with our
+/// own title, synopsis (clap's leaves out the value names), examples, exit
+/// status, environment and see-also sections.
+fn man_page(cmd: clap::Command, page: &str, usage: &str, examples: &[(String, String)], see_also: &[String]) -> std::io::Result<Vec<u8>> {
+    let version = env!("CARGO_PKG_VERSION");
+    let has_commands = cmd.get_subcommands().any(|s| !s.is_hide_set());
+    let man = clap_mangen::Man::new(cmd)
+        .title(page.to_uppercase())
+        .section("1")
+        .source(format!("pathtracer {version}"))
+        .manual("pathtracer manual");
+    let mut w = Vec::new();
+    man.render_title(&mut w)?;
+    man.render_name_section(&mut w)?;
+    let mut synopsis = String::from(".SH SYNOPSIS\n");
+    for (i, line) in usage.lines().enumerate() {
+        if i > 0 {
+            synopsis += ".br\n";
+        }
+        let words: Vec<String> = line.split_whitespace().enumerate().map(|(j, word)| if j == 0 || !word.starts_with(['[', '<']) { format!("\\fB{}\\fR", roff(word)) } else { format!("\\fI{}\\fR", roff(word)) }).collect();
+        synopsis += &words.join(" ");
+        synopsis.push('\n');
+    }
+    w.extend_from_slice(synopsis.as_bytes());
+    man.render_description_section(&mut w)?;
+    man.render_options_section(&mut w)?;
+    if has_commands {
+        man.render_subcommands_section(&mut w)?;
+    }
+    let mut tail = String::new();
+    if !examples.is_empty() {
+        tail += ".SH EXAMPLES\n";
+        for (command, what) in examples {
+            let lines: Vec<String> = command.split('\n').map(|c| format!("\\fB{}\\fR", roff(c))).collect();
+            tail += &format!(".TP\n{}\n{}\n", lines.join("\n.br\n"), roff(what));
+        }
+    }
+    tail += ".SH EXIT STATUS\n";
+    for (code, what) in EXIT_STATUS {
+        tail += &format!(".TP\n\\fB{code}\\fR\n{}\n", roff(what));
+    }
+    tail += ".SH ENVIRONMENT\n";
+    for (name, what) in ENVIRONMENT {
+        tail += &format!(".TP\n\\fB{}\\fR\n{}\n", roff(name), roff(what));
+    }
+    tail += ".SH SEE ALSO\n";
+    tail += &see_also.iter().map(|s| format!("\\fB{}\\fR(1)", roff(s))).collect::<Vec<_>>().join(", ");
+    tail += "\n";
+    tail += &format!(".SH VERSION\n{}\n", roff(&super::version_line()));
+    w.extend_from_slice(tail.as_bytes());
+    Ok(w)
+}
+
+/// The examples of `EXAMPLES` as (command lines, what they do) pairs: a
+/// description belongs to the command lines above it.
+pub fn examples() -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mut commands: Vec<String> = Vec::new();
+    for line in super::args::EXAMPLES.lines().skip(1) {
+        if let Some(what) = line.strip_prefix("      ") {
+            out.push((commands.join("\n"), what.trim().to_string()));
+            commands.clear();
+        } else {
+            commands.push(line.trim().to_string());
+        }
+    }
+    out
+}
+
 /// Write `pathtracer.1` and `pathtracer-<sub>.1` for every visible
 /// subcommand into `dir`; returns the files written.
 pub fn man_pages(dir: &Path) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::new(format!("{}: cannot create: {e}", dir.display())))?;
-    let root = reference_command().after_help(super::args::EXAMPLES);
-    let mut pages = vec![("pathtracer".to_string(), root.clone())];
-    for sub in root.get_subcommands().filter(|s| !s.is_hide_set() && s.get_name() != "help") {
-        let name = format!("pathtracer-{}", sub.get_name());
-        pages.push((name.clone(), sub.clone().name(name)));
+    let mut root = reference_command().subcommand_help_heading("COMMANDS");
+    root.build();
+    let subs: Vec<clap::Command> = root.get_subcommands().filter(|s| !s.is_hide_set() && s.get_name() != "help").cloned().collect();
+    let sub_pages: Vec<String> = subs.iter().map(|s| format!("pathtracer-{}", s.get_name())).collect();
+    let root_usage = "pathtracer [OPTIONS] [SCENE]\npathtracer COMMAND [ARGS]".to_string();
+    let mut pages = vec![("pathtracer".to_string(), root.clone().disable_help_subcommand(true), root_usage, examples(), sub_pages.clone())];
+    for sub in subs {
+        let short = sub.get_name().to_string();
+        let name = format!("pathtracer-{short}");
+        let mut sub = sub.bin_name(format!("pathtracer {short}"));
+        let usage = sub.render_usage().to_string().replace("Usage: ", "");
+        let mine: Vec<(String, String)> = examples().into_iter().filter(|(c, _)| c.contains(&format!("pathtracer {short} "))).collect();
+        let see: Vec<String> = std::iter::once("pathtracer".to_string()).chain(sub_pages.iter().filter(|p| **p != name).cloned()).collect();
+        pages.push((name.clone(), sub.name(name), usage, mine, see));
     }
     let mut written = Vec::new();
-    for (name, cmd) in pages {
-        let mut buf = Vec::new();
-        clap_mangen::Man::new(cmd).render(&mut buf).map_err(|e| Error::new(format!("man page {name}: {e}")))?;
+    for (name, cmd, usage, examples, see) in pages {
+        let buf = man_page(cmd, &name, &usage, &examples, &see).map_err(|e| Error::new(format!("man page {name}: {e}")))?;
         let path = dir.join(format!("{name}.1"));
         crate::image_io::atomically(&path, |tmp| std::fs::write(tmp, &buf).map_err(|e| e.to_string()))?;
         written.push(path);
@@ -168,6 +271,14 @@ pub fn reference_markdown() -> String {
         let sub = cmd.find_subcommand_mut(&name).expect("listed subcommand");
         let mut sub = sub.clone().bin_name(format!("pathtracer {name}"));
         command_section(&mut out, &mut sub, &format!("## pathtracer {name}"));
+    }
+    let _ = writeln!(out, "## Exit status\n\n| status | meaning |\n|---|---|");
+    for (code, what) in EXIT_STATUS {
+        let _ = writeln!(out, "| {code} | {what} |");
+    }
+    let _ = writeln!(out, "\n## Environment\n\nRead when the program runs (the build's and the tests' variables: [environment variables](environment.md)).\n\n| variable | effect |\n|---|---|");
+    for (name, what) in ENVIRONMENT {
+        let _ = writeln!(out, "| `{name}` | {what} |");
     }
     out.trim_end().to_string() + "\n"
 }

@@ -37,7 +37,7 @@ pub fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("pathtracer: error: {e}");
-                ExitCode::FAILURE
+                ExitCode::from(if e.is_usage() { 2 } else { 1 })
             }
         },
         Ok(None) => ExitCode::SUCCESS,
@@ -46,6 +46,12 @@ pub fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// "0.1.0 (commit 1a2b3c4d5e6f)": the version and the commit the binary was
+/// built from ("+ changes" where its sources differed from the commit).
+pub fn version_line() -> String {
+    format!("{} ({})", env!("CARGO_PKG_VERSION"), env!("PATHTRACER_GIT_COMMIT"))
 }
 
 /// Parse a command line (the program name first). `Ok(None)` when clap
@@ -59,7 +65,11 @@ where
     let args: Vec<T> = args.into_iter().collect();
     let bare = args.len() == 1;
     let os: Vec<std::ffi::OsString> = args.iter().cloned().map(Into::into).collect();
-    match docs::command_for(&os).try_get_matches_from(os.iter()).and_then(|m| Cli::from_arg_matches(&m)) {
+    let command = docs::command_for(&os);
+    if let Some(first) = os.get(1) {
+        not_a_command(&command, first)?;
+    }
+    match command.try_get_matches_from(os.iter()).and_then(|m| Cli::from_arg_matches(&m)) {
         Ok(c) => Ok(Some(Cli { bare, ..c })),
         Err(e) => {
             use clap::error::ErrorKind;
@@ -67,13 +77,102 @@ where
                 let _ = e.print();
                 return Ok(None);
             }
+            Err(Error::new(format!("{} (see pathtracer --help)", usage_error(&e))))
+        }
+    }
+}
+
+/// A first argument that is neither a command nor a scene: a word with no
+/// extension that names no file, such as a mistyped `merg`. Left to clap,
+/// it would be read as the scene and the next argument as a command.
+fn not_a_command(command: &clap::Command, first: &std::ffi::OsStr) -> Result<()> {
+    let Some(word) = first.to_str() else { return Ok(()) };
+    let path = Path::new(word);
+    let looks_like_scene = word.starts_with('-') || path.exists() || path.extension().is_some() || word.contains(['/', ':']);
+    let names: Vec<&str> = command.get_subcommands().filter(|s| !s.is_hide_set()).map(|s| s.get_name()).filter(|n| *n != "help").collect();
+    if looks_like_scene || command.find_subcommand(word).is_some() || word == "help" {
+        return Ok(());
+    }
+    let near = names.iter().copied().filter(|n| n.starts_with(word) || edit_distance(n, word) <= 2).min_by_key(|n| edit_distance(n, word));
+    match near {
+        Some(n) => crate::bail!("'{word}' is not a command; did you mean '{n}'? (commands: {})", names.join(", ")),
+        None => crate::bail!("'{word}' is neither a command ({}) nor a scene file ({})", names.join(", "), crate::scene::FORMATS),
+    }
+}
+
+/// Levenshtein distance, for suggesting a command.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != cb)).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
+}
+
+/// clap's parse error as one line saying what was wrong and what is
+/// accepted, without clap's own hints (its "try --help" and its tip to
+/// write `-- -1`, which this command line would read as a scene).
+fn usage_error(e: &clap::Error) -> String {
+    use clap::error::{ContextKind, ContextValue, ErrorKind};
+    let get = |k: ContextKind| match e.get(k) {
+        Some(ContextValue::String(s)) => Some(s.clone()),
+        Some(ContextValue::Strings(v)) => Some(v.join(", ")),
+        _ => None,
+    };
+    // "-s <N>" -> "-s": the flag as the user typed it.
+    let arg = get(ContextKind::InvalidArg).map(|a| a.split([' ', '=']).next().unwrap_or_default().to_string()).unwrap_or_default();
+    let value = get(ContextKind::InvalidValue).unwrap_or_default();
+    let suggestion = get(ContextKind::SuggestedArg)
+        .or_else(|| get(ContextKind::SuggestedSubcommand))
+        .or_else(|| get(ContextKind::SuggestedValue))
+        .map(|s| format!("; did you mean '{s}'?"))
+        .unwrap_or_default();
+    match e.kind() {
+        ErrorKind::InvalidValue if value.is_empty() => format!("{arg}: a value is required"),
+        ErrorKind::InvalidValue => match get(ContextKind::ValidValue) {
+            Some(valid) => format!("{arg} {value}: not one of {valid}{suggestion}"),
+            None => format!("{arg} {value}: not a valid value"),
+        },
+        ErrorKind::ValueValidation => {
+            use std::error::Error as _;
+            let source = e.source();
+            let why = if let Some(p) = source.and_then(|s| s.downcast_ref::<std::num::ParseIntError>()) {
+                use std::num::IntErrorKind::*;
+                match p.kind() {
+                    InvalidDigit if value.starts_with('-') => "expected a number of 0 or more".to_string(),
+                    InvalidDigit => "expected a whole number".to_string(),
+                    PosOverflow | NegOverflow => "the number is too large".to_string(),
+                    Empty => "a value is required".to_string(),
+                    _ => p.to_string(),
+                }
+            } else if source.is_some_and(|s| s.is::<std::num::ParseFloatError>()) {
+                "expected a number".to_string()
+            } else {
+                source.map(|s| s.to_string()).unwrap_or_else(|| "not a valid value".into())
+            };
+            format!("{arg} {value}: {why}")
+        }
+        ErrorKind::UnknownArgument => format!("unknown option '{arg}'{suggestion}"),
+        ErrorKind::InvalidSubcommand => format!("'{arg}' is not a command{suggestion}"),
+        ErrorKind::WrongNumberOfValues | ErrorKind::TooFewValues | ErrorKind::TooManyValues => match e.get(ContextKind::ExpectedNumValues) {
+            Some(ContextValue::Number(n)) => format!("{arg}: expected {n} values"),
+            _ => format!("{arg}: wrong number of values"),
+        },
+        _ => {
+            // clap's message up to its usage block (with the argument names
+            // it lists on the lines after the first), without its hints.
             let text = e.render().to_string();
-            // One line: clap's message up to its usage block, with the
-            // argument names it lists on the following lines.
             let message = text.split("\n\nUsage").next().unwrap_or("invalid arguments");
+            let message = message.split("\n\n  tip:").next().unwrap_or_default();
             let joined = message.split_whitespace().collect::<Vec<_>>().join(" ");
-            let first = joined.trim_start_matches("error: ");
-            Err(Error::new(format!("{first} (see --help)")))
+            joined.trim_start_matches("error: ").to_string()
         }
     }
 }
@@ -104,7 +203,7 @@ pub fn run(cli: Cli) -> Result<()> {
         None if cli.bare => {
             // The demo render: CS184's defaults (1 spp, direct light only)
             // would give a noisy, flat picture of the built-in scene.
-            println!("no arguments: rendering the built-in scene with -s {DEMO_SPP} -m {DEMO_DEPTH}");
+            eprintln!("no arguments: rendering the built-in scene with -s {DEMO_SPP} -m {DEMO_DEPTH}");
             let mut r = cli.render;
             r.spp = Some(DEMO_SPP);
             r.max_depth = Some(DEMO_DEPTH);
@@ -120,10 +219,11 @@ fn parse_pair<T: std::str::FromStr>(v: &[String], flag: &str) -> Result<Vec<T>> 
         .collect()
 }
 
-/// Configure the global rayon pool (`-t`; 0 or absent means all cores).
+/// Configure the global rayon pool (`-t`; absent means all cores).
 pub fn init_threads(threads: Option<usize>) -> Result<usize> {
     let n = match threads {
-        None | Some(0) => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+        None => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+        Some(0) => crate::bail!("-t 0: the thread count must be at least 1"),
         Some(n) if n > 4096 => crate::bail!("-t {n}: too many threads"),
         Some(n) => n,
     };
@@ -143,8 +243,23 @@ pub fn load_scene(path: Option<&Path>) -> Result<Scene> {
     }
 }
 
-fn run_render(a: &RenderArgs) -> Result<()> {
-    // Validate every flag before doing any work.
+/// The render's flags, checked: every value in range, every combination
+/// one the integrator supports. A failure here is a usage error (exit 2).
+struct Flags {
+    width: u32,
+    height: u32,
+    spp: u32,
+    adaptive: Option<Adaptive>,
+    batch_note: Option<String>,
+    region: Option<Region>,
+    light_samples: u32,
+    max_depth: u32,
+    accumulate: bool,
+    lens: (Option<f32>, Option<f32>),
+    part: Option<Part>,
+}
+
+fn check_flags(a: &RenderArgs) -> Result<Flags> {
     let (width, height) = frame_size(a)?;
     let spp = a.spp.unwrap_or(1);
     if spp == 0 || spp > 1 << 20 {
@@ -236,7 +351,17 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         Some(v) => crate::bail!("-o {v}: expected 0 (only bounce m) or 1 (accumulate)"),
     };
     let lens = lens_flags(a)?;
+    check_output_names(a.output.as_deref(), a.exr.as_deref(), a.variance_exr.as_deref())?;
     let part = part_flags(a, spp, adaptive.is_some(), region.unwrap_or(Region { x: 0, y: 0, w: width, h: height }))?;
+    if a.threads == Some(0) {
+        crate::bail!("-t 0: the thread count must be at least 1 (without -t every core renders)");
+    }
+    Ok(Flags { width, height, spp, adaptive, batch_note, region, light_samples, max_depth, accumulate, lens, part })
+}
+
+fn run_render(a: &RenderArgs) -> Result<()> {
+    // Validate every flag before doing any work.
+    let Flags { width, height, spp, adaptive, batch_note, region, light_samples, max_depth, accumulate, lens, part } = check_flags(a).map_err(Error::into_usage)?;
     let threads = init_threads(a.threads)?;
     let native = accel::NativeOptions::from_env()?;
 
@@ -255,10 +380,10 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             if l.lights.is_empty() {
                 // One line: the notes (a zero-radiance light dropped) go into it.
                 let why = if l.notes.is_empty() { String::new() } else { format!(" ({})", l.notes.join("; ")) };
-                println!("{}: warning: the scene has no light{why}; the image will be black (an environment map, -e FILE.exr, would light it)", scene.name);
+                eprintln!("{}: warning: the scene has no light{why}; the image will be black (an environment map, -e FILE.exr, would light it)", scene.name);
             } else {
                 for note in &l.notes {
-                    println!("{}: {note}", scene.name);
+                    eprintln!("{}: {note}", scene.name);
                 }
             }
             l
@@ -266,14 +391,14 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         IntegratorKind::Normals | IntegratorKind::Depth | IntegratorKind::ObjectId => Lights::default(),
     };
     if let Some(note) = &batch_note {
-        println!("{}: {note}", scene.name);
+        eprintln!("{}: {note}", scene.name);
     }
     // The path tracer's guide toward mirror, glass and metal objects.
     let guide = match a.integrator {
         IntegratorKind::Path => {
             let (guide, note) = SpecularGuide::of_scene(&scene, a.specular_guide);
             if let Some(note) = note {
-                println!("{}: {note}", scene.name);
+                eprintln!("{}: {note}", scene.name);
             }
             guide
         }
@@ -326,7 +451,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let out = render::render(&camera, built.accel.as_ref(), integrator.as_ref(), &settings);
     let render_s = start.elapsed().as_secs_f64();
     if out.bad_samples > 0 {
-        println!("{}: warning: {} samples had a NaN or out-of-range value (counted as 0 or ±2^36)", scene.name, out.bad_samples);
+        eprintln!("{}: warning: {} samples had a NaN or out-of-range value (counted as 0 or ±2^36)", scene.name, out.bad_samples);
     }
     if let Some(p) = &part {
         let header = crate::partial::Header {
@@ -353,8 +478,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         return Ok(());
     }
 
-    // CS184 writes the rate image beside every -f output.
-    let written = write_images(&out, &output, a.output.is_some(), a.exr.as_deref(), a.variance_exr.as_deref(), spp)?;
+    // The rate image (CS184 writes it beside every -f output) only where
+    // adaptive sampling ran: elsewhere every pixel took -s samples.
+    let written = write_images(&out, &output, a.output.is_some() && adaptive.is_some(), a.exr.as_deref(), a.variance_exr.as_deref(), spp)?;
     // With -a, how many samples the pixels kept (their mean per pixel): what adaptive
     // sampling saved against -s.
     let kept = match adaptive {
@@ -398,21 +524,36 @@ fn timings(built: &accel::Built, render_s: f64, rays: u64) -> String {
     )
 }
 
-/// A render's image files: the PNG, with `rate` its `_rate.png` beside it,
-/// and the EXRs asked for; returns the paths written. `merge` writes through
+/// The output files' names, checked before any work: the image's extension
+/// names its format (.png, .jpg, .jpeg), the EXRs end in .exr.
+pub(crate) fn check_output_names(image: Option<&Path>, exr: Option<&Path>, variance_exr: Option<&Path>) -> Result<()> {
+    if let Some(p) = image {
+        image_io::DisplayFormat::of(p)?;
+    }
+    for (p, flag) in [(exr, "--exr"), (variance_exr, "--variance-exr")] {
+        if let Some(p) = p.filter(|p| !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"))) {
+            crate::bail!("{flag} {}: an OpenEXR file's name ends in .exr", p.display());
+        }
+    }
+    Ok(())
+}
+
+/// A render's image files: the tone-mapped image in the format its name
+/// says, with `rate` (adaptive sampling ran) its `_rate.png` beside it, and
+/// the EXRs asked for; returns the paths written. `merge` writes through
 /// this too, so a merged split render writes what the render would have.
 pub(crate) fn write_images(
     out: &render::RenderOutput,
-    png: &Path,
+    image: &Path,
     rate: bool,
     exr: Option<&Path>,
     variance_exr: Option<&Path>,
     spp: u32,
 ) -> Result<Vec<String>> {
-    image_io::write_png(png, &out.image)?;
-    let mut written = vec![png.display().to_string()];
+    image_io::write_display(image, &out.image)?;
+    let mut written = vec![image.display().to_string()];
     if rate {
-        let rate = rate_path(png);
+        let rate = rate_path(image);
         image_io::write_rate_png(&rate, out.image.width, out.image.height, &out.samples, spp)?;
         written.push(rate.display().to_string());
     }

@@ -5,7 +5,7 @@ use super::{collada, Scene};
 use crate::error::Result;
 
 pub const NAME: &str = "CBspheres_lambertian";
-pub const TEXT: &str = include_str!("../../scenes/CBspheres_lambertian.dae");
+pub const TEXT: &str = include_str!("../../scenes/cs184/sky/CBspheres_lambertian.dae");
 
 pub fn load() -> Result<Scene> {
     collada::parse(TEXT, NAME, "<built-in CBspheres_lambertian>")

@@ -56,14 +56,18 @@ pub(crate) fn name_of(path: &std::path::Path) -> String {
     path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into())
 }
 
+/// The scene formats `load_file` reads, for error messages.
+pub const FORMATS: &str = "scenes are COLLADA (.dae), Wavefront OBJ (.obj) or PLY (.ply) files";
+
 /// Load a scene file by its extension: `.dae` (CS184 COLLADA), `.obj`, `.ply`.
 pub fn load_file(path: &std::path::Path) -> crate::error::Result<Scene> {
-    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    match ext.as_str() {
-        "obj" => obj::load_file(path),
-        "ply" => ply::load_file(path),
-        "dae" | "xml" => collada::load_file(path),
-        _ => crate::bail!("{}: unknown scene format '{ext}' (expected .dae, .obj or .ply)", path.display()),
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("obj") => obj::load_file(path),
+        Some("ply") => ply::load_file(path),
+        Some("dae" | "xml") => collada::load_file(path),
+        Some(other) => crate::bail!("{}: unknown scene format '.{other}': {FORMATS}", path.display()),
+        None => crate::bail!("{}: no file extension to tell its format: {FORMATS}", path.display()),
     }
 }
 

@@ -60,16 +60,11 @@ pub fn build(kind: BackendKind, shapes: &[Shape]) -> Box<dyn Traversal> {
     accel::build(kind, shapes, 0).unwrap_or_else(|e| panic!("building {kind}: {e}")).accel
 }
 
-/// The 20 CS184 scenes beside the project. Missing data is a failure, not a pass.
-pub fn shared_scene_dir() -> PathBuf {
-    let dir = std::env::var_os("PATHTRACER_SHARED_SCENES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/cs184"));
-    assert!(
-        dir.is_dir(),
-        "test data missing: CS184 scenes not found at {} (set PATHTRACER_SHARED_SCENES)",
-        dir.display()
-    );
+/// The 20 CS184 scenes the repository carries (`scenes/cs184`). Missing
+/// data is a failure, not a pass.
+pub fn cs184_scene_dir() -> PathBuf {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cs184");
+    assert!(dir.is_dir(), "test data missing: CS184 scenes not found at {}", dir.display());
     dir
 }
 
@@ -77,7 +72,7 @@ pub fn shared_scene_dir() -> PathBuf {
 pub fn shipped_scenes() -> Vec<PathBuf> {
     let mut v = Vec::new();
     for sub in ["meshedit", "simple", "sky"] {
-        let d = shared_scene_dir().join(sub);
+        let d = cs184_scene_dir().join(sub);
         for e in std::fs::read_dir(&d).unwrap_or_else(|e| panic!("{}: {e}", d.display())) {
             let p = e.unwrap().path();
             if p.extension().is_some_and(|x| x == "dae") {
@@ -86,7 +81,7 @@ pub fn shipped_scenes() -> Vec<PathBuf> {
         }
     }
     v.sort();
-    assert_eq!(v.len(), 20, "expected the 20 CS184 scenes in {}", shared_scene_dir().display());
+    assert_eq!(v.len(), 20, "expected the 20 CS184 scenes in {}", cs184_scene_dir().display());
     v
 }
 
@@ -95,7 +90,7 @@ pub fn load(p: &Path) -> Scene {
 }
 
 pub fn scene_path(sub: &str, name: &str) -> PathBuf {
-    let p = shared_scene_dir().join(sub).join(format!("{name}.dae"));
+    let p = cs184_scene_dir().join(sub).join(format!("{name}.dae"));
     assert!(p.exists(), "test data missing: {}", p.display());
     p
 }

@@ -8,7 +8,7 @@
 //! wide node's children come from several binary splits of its set in turn
 //! (`layout::gather`), so the top node of a 1M-triangle mesh partitions
 //! about 3M references before any of its subtrees can start. Serial, that
-//! was about 13 ms of the 48-52 ms tree build on the lent 16-thread Xeon
+//! was about 13 ms of the 48-52 ms tree build on a 16-vCPU Intel Xeon
 //! (build phases timed there; all the partitions of sets over 2^16 took
 //! 20-25 ms). The chunks are cut at fixed offsets, so the result never
 //! depends on the thread count.

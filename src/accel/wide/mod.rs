@@ -210,7 +210,7 @@ const PACKET_PREFETCH_BYTES: usize = 16 << 20;
 /// default, by measurement (1 thread, Mrays/s, AVX2 against AVX-512, three
 /// runs each, medians): on this project's 2-core AMD EPYC (Zen 5) within
 /// noise on every scene (cow camera 65.8/65.4, CBbunny shadow 22.3/23.0,
-/// 1M sphere camera 29.1/29.0); on the device machine's 16-core Xeon the 1M
+/// 1M sphere camera 29.1/29.0); on a 16-vCPU Intel Xeon the 1M
 /// camera rays lost 30 % (18.9 against 13.2), likely the lower clock Intel
 /// CPUs run AVX-512 code at.
 fn avx512_available(isa: super::NativeIsa) -> bool {

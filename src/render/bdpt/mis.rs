@@ -36,7 +36,8 @@
 //! spreads all light subpaths over the whole film, so over a `-p` cell of
 //! `share` of the frame's pixels the pixel gets share·n light-tracing
 //! samples. The balance of counts enters the t = 1 ratios (Veach's n_k p_k),
-//! as in pbrt-v4 after its issue 347, with the factor on the side the count
+//! as pbrt-v4 does since its fix of GitHub issue
+//! [347](https://github.com/mmp/pbrt-v4/issues/347), with the factor on the side the count
 //! belongs to.
 //!
 //! The light point y0 has two densities: as the start of a light subpath

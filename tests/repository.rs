@@ -1,0 +1,151 @@
+//! The repository is the whole product: a clone with nothing beside it
+//! carries its scenes, maps and license, never reads a folder outside
+//! itself, and speaks of the product only (no working rounds, numbered
+//! issues or borrowed machines: a measurement names its date, commit and
+//! CPU). The documented commands run from a fresh clone in `tests/docs.rs`.
+
+use regex::Regex;
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Every file git tracks that is in the working tree, with its text (None
+/// for binary files).
+fn tracked_files() -> Vec<(PathBuf, Option<String>)> {
+    let out = Command::new("git").args(["ls-files", "-z", "--cached"]).current_dir(root()).output().expect("git ls-files (these tests need git)");
+    assert!(out.status.success(), "git ls-files: {}", String::from_utf8_lossy(&out.stderr));
+    let mut v = Vec::new();
+    for name in out.stdout.split(|&b| b == 0).filter(|n| !n.is_empty()) {
+        let rel = PathBuf::from(std::str::from_utf8(name).unwrap());
+        let Ok(bytes) = std::fs::read(root().join(&rel)) else { continue };
+        let text = if bytes.contains(&0) { None } else { String::from_utf8(bytes).ok() };
+        v.push((rel, text));
+    }
+    assert!(v.len() > 100, "only {} tracked files found", v.len());
+    v
+}
+
+/// The folder a development checkout once had beside it, spelled so that
+/// this file does not name it.
+fn outside_folder() -> String {
+    format!("{}/{}", "..", "shared")
+}
+
+#[test]
+fn no_file_names_a_folder_beside_the_repository() {
+    let needle = outside_folder();
+    let bad: Vec<String> = tracked_files()
+        .into_iter()
+        .filter_map(|(p, t)| t.filter(|t| t.contains(&needle)).map(|_| p.display().to_string()))
+        .collect();
+    assert!(bad.is_empty(), "these files name {needle}, which a clone does not have: {bad:?}");
+}
+
+/// Words that tie a line to how the project was made rather than to the
+/// product: working rounds, numbered issues, borrowed machines.
+fn diary_patterns() -> Vec<(Regex, &'static str)> {
+    [
+        (r"(?i)\bsessions?\b", "a working round"),
+        (r"(?i)\bworking rounds?\b", "a working round"),
+        (r"(?i)\bstop \d+\b", "a working round"),
+        (r"(?i)\ba turn ago\b", "a working round"),
+        (r"(?i)\bissues?\s*#?\d+", "a numbered issue"),
+        (r"(?i)\b(the|this|that|its|an) issue\b", "an issue"),
+        (r"(?i)\blent\b", "a borrowed machine"),
+        (r"(?i)\bborrowed\b", "a borrowed machine"),
+        (r"(?i)\bdevice machine", "a borrowed machine"),
+    ]
+    .into_iter()
+    .map(|(p, why)| (Regex::new(p).unwrap(), why))
+    .collect()
+}
+
+/// The lines of `text` that match a diary pattern, with the reason.
+fn diary_lines(text: &str) -> Vec<(usize, &'static str)> {
+    let pats = diary_patterns();
+    text.lines().enumerate().filter_map(|(n, l)| pats.iter().find(|(r, _)| r.is_match(l)).map(|(_, why)| (n + 1, *why))).collect()
+}
+
+#[test]
+fn the_diary_check_catches_what_it_should_and_nothing_else() {
+    let s = "session";
+    let caught = [
+        format!("measured in {s} 32"),
+        format!("re-run this {s}"),
+        format!("as {} 14's item 3 asks", "issue"),
+        format!("on the {} Xeon", "lent"),
+        format!("a {} machine", "borrowed"),
+        format!("the {} machine's 16 cores", "device"),
+        format!("the {}'s goal", "issue"),
+    ];
+    for line in &caught {
+        assert_eq!(diary_lines(line).len(), 1, "not caught: {line}");
+    }
+    for line in ["2026-11-27, commit 948abe6, 2-vCPU Intel Xeon", "a silent pass", "each ray in turn", "the prevalent case", "known issues with Cycles 3.4"] {
+        assert!(diary_lines(line).is_empty(), "caught, wrongly: {line}");
+    }
+}
+
+#[test]
+fn the_repository_speaks_of_the_product_only() {
+    let mut bad = Vec::new();
+    for (p, text) in tracked_files() {
+        let Some(text) = text else { continue };
+        // The lock file is generated; this file names the patterns it checks.
+        if p == Path::new("Cargo.lock") || p == Path::new("tests/repository.rs") {
+            continue;
+        }
+        for (n, why) in diary_lines(&text) {
+            bad.push(format!("{}:{n}: names {why}: {}", p.display(), text.lines().nth(n - 1).unwrap().trim()));
+        }
+    }
+    assert!(bad.is_empty(), "{} lines speak of how the project was made (name a measurement by its date, commit and CPU instead):\n{}", bad.len(), bad.join("\n"));
+}
+
+#[test]
+fn license_is_mit_and_names_the_third_party_data() {
+    let text = std::fs::read_to_string(root().join("LICENSE")).expect("LICENSE missing");
+    assert!(text.starts_with("MIT License"), "LICENSE is not the MIT license");
+    assert!(text.contains("scenes/README.md"));
+    let cargo = std::fs::read_to_string(root().join("Cargo.toml")).unwrap();
+    assert!(cargo.contains("license = \"MIT\""));
+}
+
+/// Every file under scenes/ is listed on scenes/README.md with the SHA-256
+/// it has, and every listed file is there.
+#[test]
+fn the_scenes_are_the_files_their_provenance_page_names() {
+    let page = std::fs::read_to_string(root().join("scenes/README.md")).expect("scenes/README.md missing");
+    let row = Regex::new(r"^\| `([^`]+)` \|.*\| `([0-9a-f]{64})` \| `([0-9a-f]{40})` \|$").unwrap();
+    let mut listed = BTreeSet::new();
+    for line in page.lines() {
+        let Some(c) = row.captures(line) else { continue };
+        let rel = Path::new("scenes").join(&c[1]);
+        let bytes = std::fs::read(root().join(&rel)).unwrap_or_else(|e| panic!("{}: {e} (listed on scenes/README.md)", rel.display()));
+        let sha = pathtracer::partial::sha256_hex(&bytes);
+        assert_eq!(sha, &c[2], "{}: its SHA-256 is not the one scenes/README.md gives", rel.display());
+        listed.insert(rel);
+    }
+    assert_eq!(listed.iter().filter(|p| p.extension().is_some_and(|x| x == "dae")).count(), 20, "the 20 CS184 scenes");
+    assert_eq!(listed.iter().filter(|p| p.extension().is_some_and(|x| x == "exr")).count(), 4, "the 4 environment maps");
+    let mut stack = vec![root().join("scenes")];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+                continue;
+            }
+            let rel = p.strip_prefix(root()).unwrap().to_path_buf();
+            let name = rel.file_name().unwrap().to_string_lossy();
+            if name == "README.md" || name.starts_with("LICENSE") {
+                continue;
+            }
+            assert!(listed.contains(&rel), "{} is not on scenes/README.md", rel.display());
+        }
+    }
+}
