@@ -12,7 +12,7 @@ import os
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-RAYS = ["camera", "shadow", "random"]
+RAYS = ["camera", "shadow", "random", "diffuse"]
 
 
 def main():

@@ -15,7 +15,7 @@ import re
 import sys
 from pathlib import Path
 
-KINDS = ["camera", "shadow", "random"]
+KINDS = ["camera", "shadow", "random", "diffuse"]
 
 
 def load(path):

@@ -270,9 +270,10 @@ fn bench_writes_csv_and_markdown_tables() {
     backends.push("brute".into());
     let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let thread_counts = if threads > 1 { 2 } else { 1 };
-    assert_eq!(rows.len(), 3 * backends.len() * thread_counts, "{csv}");
+    let kinds = ["camera", "shadow", "random", "random single", "diffuse", "diffuse single"];
+    assert_eq!(rows.len(), kinds.len() * backends.len() * thread_counts, "{csv}");
     for b in &backends {
-        for kind in ["camera", "shadow", "random"] {
+        for kind in kinds {
             let row = rows.iter().find(|r| r[0] == "cow" && r[1] == kind && r[3] == b.as_str() && r[2] == "1");
             let row = row.unwrap_or_else(|| panic!("no 1-thread {kind} row for {b}: {csv}"));
             let m: f64 = row[4].parse().unwrap();

@@ -216,7 +216,7 @@ fn obj_and_ply_bad_input_fails_cleanly_in_one_line() {
         ("header.ply", b"plyx\nformat ascii 1.0\nend_header\n".to_vec(), "not a valid PLY header"),
         ("truncated.ply", truncated, "bad 'vertex' data"),
         ("nan.ply", nan, "vertex 1 has a missing or non-finite coordinate"),
-        ("mesh.stl", b"solid x\nendsolid x\n".to_vec(), "unknown scene format 'stl' (expected .dae, .obj or .ply)"),
+        ("mesh.stl", b"solid x\nendsolid x\n".to_vec(), "unknown scene format '.stl': scenes are COLLADA (.dae), Wavefront OBJ (.obj) or PLY (.ply) files"),
     ];
     for (file, bytes, expect) in cases {
         // Each case in its own folder: `expect_failure` checks nothing else is left there.

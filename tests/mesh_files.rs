@@ -166,7 +166,7 @@ fn scenes_beyond_what_f32_ray_arithmetic_carries_are_refused_by_every_loader() {
 
     // COLLADA: a vertex at 3e38 (a render was silently black before), a
     // sphere of radius 1e30 (SAH cost NaN).
-    let dae = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/CBspheres_lambertian.dae")).unwrap();
+    let dae = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/cs184/sky/CBspheres_lambertian.dae")).unwrap();
     let far = dae.replacen("count=\"12\">1 1.5 -1", "count=\"12\">3e38 1.5 -1", 1);
     assert_ne!(far, dae);
     let e = pathtracer::scene::collada::parse(&far, "x", "x.dae").unwrap_err().0;

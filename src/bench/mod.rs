@@ -22,9 +22,9 @@ pub mod scenes;
 mod tables;
 mod timing;
 
-pub use rays::{camera_rays, random_rays, shadow_rays};
+pub use rays::{camera_rays, diffuse_rays, random_rays, shadow_rays};
 pub use timing::PASSES;
-use timing::{throughput, throughputs, RayKind};
+use timing::{throughput, throughputs, RayKind, RaySet, TIMED};
 
 pub use tables::Sample;
 use tables::{ratio_table, scaling_table};
@@ -273,6 +273,7 @@ fn embree_modes(
     cam: &[Ray],
     rnd: &[Ray],
     shadow: &[Ray],
+    diffuse: &[Ray],
     rows: &mut String,
     best: &mut Vec<(String, &'static str, Contender, f64)>,
 ) -> Result<()> {
@@ -283,6 +284,7 @@ fn embree_modes(
         ("camera", cam, Some(RayKind::Camera), RayKind::Random),
         ("shadow", shadow, Some(RayKind::Shadow), RayKind::ShadowIncoherent),
         ("random", rnd, None, RayKind::Random),
+        ("diffuse", diffuse, None, RayKind::Random),
     ] {
         let mut cells = Vec::new();
         let mut top = 0.0f64;
@@ -408,12 +410,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let _ = writeln!(md, "Machine: {}, {all} threads.\n", cpu_model());
     let _ = writeln!(md, "Throughput in Mrays/s (best of {} passes after an untimed one, the contenders' passes alternating; brute: one pass on a 1/32 subset). Threads: {threads_said}. Build: best of {BUILD_REPS} builds on {all} threads.\n", args.passes);
     let _ = write!(md, "| scene | prims | backend | build ms | MiB | B/prim |");
-    for rays in ["camera", "shadow", "random"] {
+    for rays in timing::labels() {
         for t in &thread_counts {
             let _ = write!(md, " {rays} {t}T |");
         }
     }
-    let _ = writeln!(md, "\n|---|---:|---|---:|---:|---:|{}", "---:|".repeat(3 * thread_counts.len()));
+    let _ = writeln!(md, "\n|---|---:|---|---:|---:|---:|{}", "---:|".repeat(TIMED.len() * thread_counts.len()));
     let mut render_rows = String::new();
     let mut sah_rows = String::new();
     #[allow(unused_mut)]
@@ -476,10 +478,18 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         // threads alike, Embree 70 and 69).
         let shadow = shadow_rays(&scene, first.accel.as_ref(), &cam);
         let shadow: Vec<Ray> = if shadow.is_empty() { shadow } else { shadow.iter().cycle().take(args.rays).copied().collect() };
-        let sh = &shadow;
+        // Diffuse rays from the same hits, repeated up to `--rays` alike.
+        let diffuse = diffuse_rays(&scene, first.accel.as_ref(), &cam_all, 7);
+        let diffuse: Vec<Ray> = if diffuse.is_empty() { diffuse } else { diffuse.iter().cycle().take(args.rays).copied().collect() };
         let timed: Vec<&dyn Traversal> = built.iter().filter(|(k, _)| *k != brute).map(|(_, b)| b.accel.as_ref()).collect();
         let mut cells: Vec<Vec<f64>> = vec![Vec::new(); built.len()];
-        for (label, rays, rk) in [("camera", &cam, RayKind::Camera), ("shadow", sh, RayKind::Shadow), ("random", &rnd, RayKind::Random)] {
+        for (label, set, rk) in TIMED {
+            let rays = match set {
+                RaySet::Camera => &cam,
+                RaySet::Shadow => &shadow,
+                RaySet::Random => &rnd,
+                RaySet::Diffuse => &diffuse,
+            };
             for &t in &thread_counts {
                 let mut speeds = throughputs(&timed, rays, rk, t, args.passes).into_iter();
                 for (i, (kind, b)) in built.iter().enumerate() {
@@ -496,7 +506,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         }
         for &kind in &contenders {
             if kind == brute && prims > BRUTE_LIMIT {
-                let _ = writeln!(md, "| {} | {} | brute | – | – | – | skipped above {} primitives |{}", scene.name, prims, BRUTE_LIMIT, " |".repeat(3 * thread_counts.len() - 1));
+                let _ = writeln!(md, "| {} | {} | brute | – | – | – | skipped above {} primitives |{}", scene.name, prims, BRUTE_LIMIT, " |".repeat(TIMED.len() * thread_counts.len() - 1));
                 continue;
             }
             let Some(i) = built.iter().position(|(k, _)| *k == kind) else { continue };
@@ -529,7 +539,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         #[cfg(has_embree)]
         if !args.throughput_only {
             for &major in &majors {
-                embree_modes(major, &scene, &cam, &rnd, &shadow, &mut mode_rows, &mut embree_best)?;
+                embree_modes(major, &scene, &cam, &rnd, &shadow, &diffuse, &mut mode_rows, &mut embree_best)?;
             }
         }
         if !no_render && !scene.source.starts_with("<generated") {

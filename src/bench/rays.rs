@@ -1,7 +1,8 @@
 //! The ray sets the benchmark times, public so that the cross-check tests
 //! trace exactly these: camera rays through pixel centres, incoherent
-//! random rays, and shadow rays from the camera rays' hits towards one
-//! point above the scene.
+//! random rays, shadow rays from the camera rays' hits towards one point
+//! above the scene, and diffuse rays leaving those hits in
+//! cosine-distributed directions (the rays a path tracer traces most).
 
 use crate::accel::{Hit, Traversal};
 use crate::camera::Camera;
@@ -36,6 +37,28 @@ pub fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
             let phi = 2.0 * std::f32::consts::PI * rng.uniform();
             let r = (1.0 - z * z).max(0.0).sqrt();
             Ray::new(o, Vec3::new(r * phi.cos(), r * phi.sin(), z))
+        })
+        .collect()
+}
+
+/// Diffuse bounce rays: from the first hits of `primary`, in their order
+/// (so that neighbouring rays leave neighbouring points, as a path tracer's
+/// batch of a tile's bounce rays does), each in a cosine-distributed
+/// direction about the geometric normal on the side the camera ray came
+/// from, its origin stepped off the surface as the renderer's are
+/// (`Interaction::spawn_ray`). Fixed seed: the same rays every run.
+pub fn diffuse_rays(scene: &Scene, accel: &dyn Traversal, primary: &[Ray], seed: u64) -> Vec<Ray> {
+    use crate::sampling::{cosine_hemisphere, Frame};
+    use crate::scene::Interaction;
+    let hits: Vec<(usize, Hit)> = primary.par_iter().enumerate().filter_map(|(i, r)| accel.intersect(r).map(|h| (i, h))).collect();
+    hits.par_iter()
+        .map(|&(i, h)| {
+            let r = &primary[i];
+            let it = Interaction::new(scene, r, &h);
+            let n = if it.ng.dot(r.dir) < 0.0 { it.ng } else { -it.ng };
+            let mut rng = Rng::new(seed, i as u64);
+            let local = cosine_hemisphere(rng.uniform(), rng.uniform());
+            it.spawn_ray(Frame::new(n).to_world(local))
         })
         .collect()
 }

@@ -21,10 +21,17 @@ fn mrays(samples: &[Sample], scene: &str, rays: &str, threads: usize, backend: C
     samples.iter().find(|s| s.scene == scene && s.rays == rays && s.threads == threads && s.backend == backend).map(|s| s.mrays_per_s)
 }
 
+/// The batch kinds compared with each Embree's fastest call.
+pub(super) const BEST_CALL_KINDS: [&str; 4] = ["camera", "shadow", "random", "diffuse"];
+
 /// native's 1-thread Mrays/s ÷ `best` (per scene, Embree and ray kind: its
 /// fastest batch call, `embree_modes`), as a table.
 pub(super) fn best_call_table(samples: &[Sample], best: &[(String, &'static str, Contender, f64)]) -> String {
-    let mut out = String::from("| scene | ÷ | camera 1T | shadow 1T | random 1T |\n|---|---|---:|---:|---:|\n");
+    let mut out = String::from("| scene | ÷ |");
+    for rays in BEST_CALL_KINDS {
+        let _ = write!(out, " {rays} 1T |");
+    }
+    let _ = writeln!(out, "\n|---|---|{}", "---:|".repeat(BEST_CALL_KINDS.len()));
     let contenders: Vec<Contender> = best.iter().fold(Vec::new(), |mut v, b| {
         if !v.contains(&b.2) {
             v.push(b.2);
@@ -34,7 +41,7 @@ pub(super) fn best_call_table(samples: &[Sample], best: &[(String, &'static str,
     for sc in in_order(best.iter().map(|b| b.0.as_str())) {
         for &c in &contenders {
             let mut row = format!("| {sc} | {c} |");
-            for rays in ["camera", "shadow", "random"] {
+            for rays in BEST_CALL_KINDS {
                 let native = mrays(samples, sc, rays, 1, Contender::Backend(BackendKind::Native));
                 let e = best.iter().find(|b| b.0 == sc && b.1 == rays && b.2 == c).map(|b| b.3);
                 match (native, e) {
@@ -56,7 +63,7 @@ pub(super) fn ratio_table(samples: &[Sample], threads: &[usize], other: Contende
     let scenes = in_order(samples.iter().map(|s| s.scene.as_str()));
     let mut header = String::from("| scene |");
     let mut rule = String::from("|---|");
-    for rays in ["camera", "shadow", "random"] {
+    for rays in super::timing::labels() {
         for &t in threads {
             let _ = write!(header, " {rays} {t}T |");
             rule.push_str("---:|");
@@ -66,7 +73,7 @@ pub(super) fn ratio_table(samples: &[Sample], threads: &[usize], other: Contende
     for sc in scenes {
         let mut row = format!("| {sc} |");
         let mut any = false;
-        for rays in ["camera", "shadow", "random"] {
+        for rays in super::timing::labels() {
             for &t in threads {
                 match (mrays(samples, sc, rays, t, Contender::Backend(BackendKind::Native)), mrays(samples, sc, rays, t, other)) {
                     (Some(n), Some(e)) => {
@@ -107,7 +114,7 @@ pub(super) fn scaling_table(samples: &[Sample], threads: &[usize]) -> String {
     for sc in in_order(samples.iter().map(|s| s.scene.as_str())) {
         let contenders = in_order(samples.iter().filter(|s| s.scene == sc && s.backend != brute).map(|s| s.backend));
         for b in contenders {
-            for rays in ["camera", "shadow", "random"] {
+            for rays in super::timing::labels() {
                 let at = |t: usize| mrays(samples, sc, rays, t, b);
                 let _ = write!(out, "| {sc} | {b} | {rays} |");
                 for &t in threads {
@@ -175,7 +182,7 @@ mod tests {
         let table = ratio_table(&s, &[1, 8], Contender::Backend(BackendKind::Embree4));
         assert!(table.contains("shadow 8T"), "{table}");
         let row = table.lines().find(|l| l.starts_with("| arch |")).unwrap();
-        assert_eq!(row, "| arch | – | – | 0.50 | 0.50 | – | – |");
+        assert_eq!(row, "| arch | – | – | 0.50 | 0.50 | – | – | – | – | – | – | – | – |");
     }
 }
 

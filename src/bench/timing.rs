@@ -11,13 +11,44 @@ use std::time::Instant;
 pub(super) enum RayKind {
     Camera,
     Shadow,
+    /// Closest hits through the incoherent batch call (`intersect_batch`):
+    /// random and diffuse rays.
     Random,
+    /// Closest hits one ray per call (`intersect`): what a caller without
+    /// batches gets.
+    Single,
     /// Shadow rays through the incoherent batch call (`occluded_batch`):
     /// only for the Embree batch-call table, where Embree's stream with the
     /// incoherent flag is its fastest call on some scenes (so unused in a
     /// build without Embree).
     #[cfg_attr(not(has_embree), allow(dead_code))]
     ShadowIncoherent,
+}
+
+/// The ray kinds every contender is timed on, with the set each traces and
+/// the call it goes through: camera and shadow rays as coherent batches;
+/// random and diffuse rays as incoherent batches and one ray per call.
+pub(super) const TIMED: [(&str, RaySet, RayKind); 6] = [
+    ("camera", RaySet::Camera, RayKind::Camera),
+    ("shadow", RaySet::Shadow, RayKind::Shadow),
+    ("random", RaySet::Random, RayKind::Random),
+    ("random single", RaySet::Random, RayKind::Single),
+    ("diffuse", RaySet::Diffuse, RayKind::Random),
+    ("diffuse single", RaySet::Diffuse, RayKind::Single),
+];
+
+/// The ray kinds' labels, in the tables' order.
+pub(super) fn labels() -> impl Iterator<Item = &'static str> {
+    TIMED.iter().map(|t| t.0)
+}
+
+/// Which of the bench's ray sets (`rays`) a timed kind traces.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(super) enum RaySet {
+    Camera,
+    Shadow,
+    Random,
+    Diffuse,
 }
 
 /// Best-of-`reps` Mrays/s on `threads` threads, chunks of 4096 rays, after
@@ -89,6 +120,10 @@ fn trace_pass(accel: &dyn Traversal, rays: &[Ray], kind: RayKind) {
         RayKind::Random => {
             let mut out = vec![None; chunk.len()];
             accel.intersect_batch(chunk, &mut out);
+            std::hint::black_box(&out);
+        }
+        RayKind::Single => {
+            let out: Vec<Option<crate::accel::Hit>> = chunk.iter().map(|r| accel.intersect(r)).collect();
             std::hint::black_box(&out);
         }
     })

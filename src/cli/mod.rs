@@ -257,6 +257,8 @@ struct Flags {
     accumulate: bool,
     lens: (Option<f32>, Option<f32>),
     part: Option<Part>,
+    /// `--bdpt-strategy`, parsed.
+    strategy: Option<Technique>,
 }
 
 fn check_flags(a: &RenderArgs) -> Result<Flags> {
@@ -356,12 +358,13 @@ fn check_flags(a: &RenderArgs) -> Result<Flags> {
     if a.threads == Some(0) {
         crate::bail!("-t 0: the thread count must be at least 1 (without -t every core renders)");
     }
-    Ok(Flags { width, height, spp, adaptive, batch_note, region, light_samples, max_depth, accumulate, lens, part })
+    let strategy = a.bdpt_strategy.as_deref().map(parse_strategy).transpose()?;
+    Ok(Flags { width, height, spp, adaptive, batch_note, region, light_samples, max_depth, accumulate, lens, part, strategy })
 }
 
 fn run_render(a: &RenderArgs) -> Result<()> {
     // Validate every flag before doing any work.
-    let Flags { width, height, spp, adaptive, batch_note, region, light_samples, max_depth, accumulate, lens, part } = check_flags(a).map_err(Error::into_usage)?;
+    let Flags { width, height, spp, adaptive, batch_note, region, light_samples, max_depth, accumulate, lens, part, strategy } = check_flags(a).map_err(Error::into_usage)?;
     let threads = init_threads(a.threads)?;
     let native = accel::NativeOptions::from_env()?;
 
@@ -421,9 +424,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             russian_roulette: !a.no_rr,
         }),
         IntegratorKind::Bdpt | IntegratorKind::Light => {
-            let technique = match (&a.bdpt_strategy, a.integrator) {
+            let technique = match (strategy, a.integrator) {
                 (_, IntegratorKind::Light) => Technique::LightTracing,
-                (Some(text), _) => parse_strategy(text)?,
+                (Some(t), _) => t,
                 (None, _) => Technique::Bidirectional,
             };
             let region = region.unwrap_or(Region { x: 0, y: 0, w: width, h: height });

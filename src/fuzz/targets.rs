@@ -168,7 +168,8 @@ impl Workspace {
             Err(payload) => Outcome::Panicked(super::panic_message(payload.as_ref())),
             _ if held > super::MEMORY_BOUND => Outcome::Memory(format!("the case held {} MiB at once", held >> 20)),
             _ if !left.is_empty() => Outcome::LeftOutput(format!("files beside the input: {}", left.join(", "))),
-            Ok(Ok(())) if written == ["img.png", "img_rate.png"] => Outcome::Rendered,
+            // The rate image only where adaptive sampling ran (an adaptive partial's merge).
+            Ok(Ok(())) if written == ["img.png"] || written == ["img.png", "img_rate.png"] => Outcome::Rendered,
             Ok(Ok(())) => Outcome::LeftOutput(format!("a successful run wrote {written:?}")),
             Ok(Err(_)) if !written.is_empty() => Outcome::LeftOutput(format!("a refused run left {written:?}")),
             Ok(Err(e)) => {
