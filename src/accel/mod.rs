@@ -16,7 +16,7 @@ pub mod tinybvh_peer;
 pub mod options;
 pub mod prims;
 
-pub use options::{BuildOptions, NativeIsa, NativeOptions, ShadowWay};
+pub use options::{BatchWay, BuildOptions, NativeIsa, NativeOptions, ShadowWay};
 
 use crate::error::Result;
 use crate::ray::Ray;

@@ -20,16 +20,32 @@ pub enum NativeIsa {
     Avx512Packets,
 }
 
-/// How native traces coherent shadow batches over large trees.
+/// How native traces coherent shadow batches.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum ShadowWay {
-    /// Time packets and streams on samples of the batches, keep the faster
-    /// (the default; see `wide::stream`).
+    /// Streams on trees whose rays miss the caches, packets elsewhere,
+    /// decided when the tree is built (the default; see `wide::stream`).
     #[default]
-    Timed,
+    Auto,
     /// Always packets.
     Packets,
     /// Always streams.
+    Streams,
+}
+
+/// How native traces incoherent closest-hit batches (`intersect_batch`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum BatchWay {
+    /// Per batch, from the batch itself: streams where its rays start close
+    /// together, else interleaved single rays on trees whose rays miss the
+    /// caches, else single rays (the default; see `wide::hit_stream`).
+    #[default]
+    Auto,
+    /// One ray at a time.
+    Single,
+    /// Interleaved single rays (`wide::interleave`).
+    Interleaved,
+    /// Streams (`wide::hit_stream`).
     Streams,
 }
 
@@ -41,18 +57,21 @@ pub struct NativeOptions {
     /// the default by measurement; at most 4).
     pub split_budget: f64,
     pub shadow: ShadowWay,
+    pub batch: BatchWay,
 }
 
 impl Default for NativeOptions {
     fn default() -> Self {
-        NativeOptions { isa: NativeIsa::Auto, split_budget: 0.0, shadow: ShadowWay::Timed }
+        NativeOptions { isa: NativeIsa::Auto, split_budget: 0.0, shadow: ShadowWay::Auto, batch: BatchWay::Auto }
     }
 }
 
 impl NativeOptions {
     /// From `PATHTRACER_NATIVE_ISA` (`sse`, `avx512`), `PATHTRACER_NATIVE_SPLITS`
-    /// (a number from 0 to 4) and `PATHTRACER_NATIVE_SHADOW` (`packets`,
-    /// `streams`); a value outside these is refused, naming the switch.
+    /// (a number from 0 to 4), `PATHTRACER_NATIVE_SHADOW` (`packets`,
+    /// `streams`, `auto`) and `PATHTRACER_NATIVE_BATCH` (`single`,
+    /// `interleaved`, `streams`, `auto`); a value outside these is refused,
+    /// naming the switch.
     pub fn from_env() -> Result<NativeOptions> {
         Self::from_lookup(|k| std::env::var(k).ok())
     }
@@ -79,8 +98,17 @@ impl NativeOptions {
             o.shadow = match v.as_str() {
                 "packets" => ShadowWay::Packets,
                 "streams" => ShadowWay::Streams,
-                "timed" => ShadowWay::Timed,
-                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_SHADOW={v}: expected packets, streams or timed"))),
+                "auto" => ShadowWay::Auto,
+                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_SHADOW={v}: expected packets, streams or auto"))),
+            };
+        }
+        if let Some(v) = var("PATHTRACER_NATIVE_BATCH") {
+            o.batch = match v.as_str() {
+                "single" => BatchWay::Single,
+                "interleaved" => BatchWay::Interleaved,
+                "streams" => BatchWay::Streams,
+                "auto" => BatchWay::Auto,
+                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_BATCH={v}: expected single, interleaved, streams or auto"))),
             };
         }
         Ok(o)
@@ -109,7 +137,8 @@ mod tests {
         let o = parse(&[("PATHTRACER_NATIVE_ISA", "sse"), ("PATHTRACER_NATIVE_SPLITS", "0.3"), ("PATHTRACER_NATIVE_SHADOW", "streams")]).unwrap();
         assert_eq!((o.isa, o.split_budget, o.shadow), (NativeIsa::Sse2, 0.3, ShadowWay::Streams));
         assert_eq!(parse(&[("PATHTRACER_NATIVE_ISA", "avx512")]).unwrap().isa, NativeIsa::Avx512Packets);
-        for (k, v) in [("PATHTRACER_NATIVE_ISA", "neon"), ("PATHTRACER_NATIVE_SPLITS", "5"), ("PATHTRACER_NATIVE_SPLITS", "nan"), ("PATHTRACER_NATIVE_SHADOW", "both")] {
+        assert_eq!(parse(&[("PATHTRACER_NATIVE_BATCH", "streams")]).unwrap().batch, BatchWay::Streams);
+        for (k, v) in [("PATHTRACER_NATIVE_BATCH", "sorted"), ("PATHTRACER_NATIVE_ISA", "neon"), ("PATHTRACER_NATIVE_SPLITS", "5"), ("PATHTRACER_NATIVE_SPLITS", "nan"), ("PATHTRACER_NATIVE_SHADOW", "both")] {
             let e = parse(&[(k, v)]).unwrap_err().0;
             assert!(e.starts_with(&format!("{k}={v}: expected")), "{e}");
         }

@@ -22,7 +22,7 @@ pub mod scenes;
 mod tables;
 mod timing;
 
-pub use rays::{camera_rays, diffuse_rays, random_rays, shadow_rays};
+pub use rays::{camera_rays, diffuse_rays, random_rays, shadow_rays, tile_order};
 pub use timing::PASSES;
 use timing::{throughput, throughputs, RayKind, RaySet, TIMED};
 
@@ -479,7 +479,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let shadow = shadow_rays(&scene, first.accel.as_ref(), &cam);
         let shadow: Vec<Ray> = if shadow.is_empty() { shadow } else { shadow.iter().cycle().take(args.rays).copied().collect() };
         // Diffuse rays from the same hits, repeated up to `--rays` alike.
-        let diffuse = diffuse_rays(&scene, first.accel.as_ref(), &cam_all, 7);
+        let tiles = tile_order(&cam_all, w, h, crate::render::TILE);
+        let diffuse = diffuse_rays(&scene, first.accel.as_ref(), &tiles, 7);
         let diffuse: Vec<Ray> = if diffuse.is_empty() { diffuse } else { diffuse.iter().cycle().take(args.rays).copied().collect() };
         let timed: Vec<&dyn Traversal> = built.iter().filter(|(k, _)| *k != brute).map(|(_, b)| b.accel.as_ref()).collect();
         let mut cells: Vec<Vec<f64>> = vec![Vec::new(); built.len()];

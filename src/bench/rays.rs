@@ -41,9 +41,27 @@ pub fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
         .collect()
 }
 
+/// The rays of a `w x h` scanline-ordered frame (`camera_rays`) reordered
+/// tile by tile, `tile x tile` pixels each (scanlines inside a tile, tiles
+/// in scanline order): the order a path tracer's batches come in.
+pub fn tile_order(rays: &[Ray], w: u32, h: u32, tile: u32) -> Vec<Ray> {
+    assert_eq!(rays.len(), (w * h) as usize);
+    let mut out = Vec::with_capacity(rays.len());
+    for ty in (0..h).step_by(tile as usize) {
+        for tx in (0..w).step_by(tile as usize) {
+            for y in ty..(ty + tile).min(h) {
+                for x in tx..(tx + tile).min(w) {
+                    out.push(rays[(y * w + x) as usize]);
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Diffuse bounce rays: from the first hits of `primary`, in their order
-/// (so that neighbouring rays leave neighbouring points, as a path tracer's
-/// batch of a tile's bounce rays does), each in a cosine-distributed
+/// (given in tile order, neighbouring rays leave neighbouring points, as a
+/// path tracer's batch of a tile's bounce rays does), each in a cosine-distributed
 /// direction about the geometric normal on the side the camera ray came
 /// from, its origin stepped off the surface as the renderer's are
 /// (`Interaction::spawn_ray`). Fixed seed: the same rays every run.

@@ -69,10 +69,11 @@ pub const EXIT_STATUS: [(u8, &str); 3] = [
 
 /// The environment variables the program reads when it runs (the build's
 /// and the tests' are in docs/reference/environment.md).
-pub const ENVIRONMENT: [(&str, &str); 6] = [
+pub const ENVIRONMENT: [(&str, &str); 7] = [
     ("PATHTRACER_NATIVE_ISA", "sse, avx2 or avx512: the SIMD level of the native backend's kernels (default: avx2 where the CPU has it)."),
     ("PATHTRACER_NATIVE_SPLITS", "a number from 0 to 4: spatial splits in the native BVH build, extra references per primitive allowed (default 0)."),
-    ("PATHTRACER_NATIVE_SHADOW", "packets, streams or timed: how the native backend traces coherent shadow batches (default timed)."),
+    ("PATHTRACER_NATIVE_BATCH", "single, interleaved, streams or auto: how the native backend traces incoherent closest-hit batches (default auto: decided per batch)."),
+    ("PATHTRACER_NATIVE_SHADOW", "packets, streams or auto: how the native backend traces coherent shadow batches (default auto: streams on large trees whose rays miss the caches, packets elsewhere)."),
     ("PATHTRACER_EMBREE_CONFIG", "an Embree device configuration string, appended to every Embree device's (verbose=2 prints Embree's build statistics)."),
     ("PATHTRACER_SCENES", "a folder where bench looks for scenes given by name, before scenes/cs184 under the current folder."),
     ("CI", "set to anything: no progress bar (as when standard error is not a terminal)."),

@@ -220,13 +220,13 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    /// As `closest_packets`, for occlusion; on trees where streams may
-    /// pay, packets or streams as timed (`any_either_way`).
+    /// As `closest_packets`, for occlusion; on trees that stream their
+    /// shadow rays (`stream_shadows`), in streams.
     #[inline(always)]
     unsafe fn any_packets<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool]) {
         let order = self.any_order::<true>(rays);
         if self.stream_shadows {
-            return self.any_either_way::<WIDE>(rays, out, order);
+            return self.any_streams(rays, out, order);
         }
         self.any_packet_way::<WIDE>(rays, out, order)
     }

@@ -25,6 +25,7 @@
 
 mod cost;
 mod frustum;
+mod hit_stream;
 mod interleave;
 mod leaf_rays;
 mod kernels;
@@ -117,6 +118,9 @@ pub struct WideBvh<const W: usize> {
     /// Half area of the root's box, for the SAH cost (computed on demand,
     /// see `sah`: it is a report, not part of the build).
     root_area: f64,
+    /// Length of the root box's diagonal: the scale against which a
+    /// batch's coherence is judged (`streams_pay`).
+    root_diagonal: f32,
     /// Box tests with AVX2 (8 boxes per instruction): `W` = 8 on a CPU that
     /// has it, unless `PATHTRACER_NATIVE_ISA=sse` asks for the SSE2 path.
     avx: bool,
@@ -129,19 +133,13 @@ pub struct WideBvh<const W: usize> {
     /// Packets prefetch the leaves (and masked packets the nodes) they are
     /// about to enter (`PACKET_PREFETCH_BYTES`).
     prefetch_packets: bool,
-    /// Occlusion batches may go in streams (`stream`) rather than
-    /// packets: the tree is large enough for streams to pay on some rays
-    /// (`STREAM_MIN_BYTES`); which way a batch goes is timed (`shadow_way`).
+    /// Coherent occlusion batches go in streams (`stream`) rather than
+    /// packets: the tree is large and its rays miss the caches (see
+    /// `stream`), or the build options ask for streams (`ShadowWay`).
     stream_shadows: bool,
-    /// The way last chosen for occlusion batches (0 none yet, 1 packets, 2
-    /// streams), the batches that asked, and each way's decayed time per
-    /// ray (`shadow_way`).
-    shadow_way: std::sync::atomic::AtomicU8,
-    way_calls: std::sync::atomic::AtomicU32,
-    /// The shadow way the build options fix (`ShadowWay`): 0 timed, 1
-    /// packets, 2 streams.
-    forced_shadow_way: u8,
-    way_time: [std::sync::atomic::AtomicU32; 2],
+    /// How incoherent closest-hit batches go (`BatchWay`; `Auto` decides
+    /// per batch).
+    batch: super::BatchWay,
     /// The any-hit child order last chosen (`any_order`): 0 none yet, 1
     /// farthest first, 2 nearest first; and the batches that asked.
     any_order: std::sync::atomic::AtomicU8,
@@ -245,21 +243,23 @@ impl<const W: usize> WideBvh<W> {
         let spare = (prims.len() as f64 * budget) as usize;
         let mut refs = prim_refs(&prims, spare);
         let mut out = Arrays::<W>::default();
-        let (mut root, mut root_area) = (EMPTY, 0.0);
+        let (mut root, mut root_area, mut root_diagonal) = (EMPTY, 0.0, 0.0);
         if let Some(set) = BuildSet::root(&mut refs, prims.len()) {
             root_area = set.half_area() as f64;
+            root_diagonal = set.bounds().extent().length();
             let mut part = layout::Part::with_room_for(prims.len());
             let code = part.build(set, &prims);
             (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, &prims);
         }
-        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, avx: W == 8 && avx_available_for(options.isa), avx512: W == 8 && avx512_available(options.isa), forced_shadow_way: match options.shadow {
-            super::ShadowWay::Timed => 0,
-            super::ShadowWay::Packets => 1,
-            super::ShadowWay::Streams => 2,
-        }, interleave: false, prefetch_packets: false, stream_shadows: false, shadow_way: Default::default(), way_calls: Default::default(), way_time: Default::default(), any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
+        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, root_diagonal, avx: W == 8 && avx_available_for(options.isa), avx512: W == 8 && avx512_available(options.isa), interleave: false, prefetch_packets: false, stream_shadows: false, batch: options.batch, any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
         b.interleave = b.avx && b.interleave_pays();
         b.prefetch_packets = b.memory_bytes() >= PACKET_PREFETCH_BYTES;
-        b.stream_shadows = b.avx && b.memory_bytes() >= STREAM_MIN_BYTES;
+        b.stream_shadows = b.avx
+            && match options.shadow {
+                super::ShadowWay::Auto => b.interleave && b.memory_bytes() >= STREAM_MIN_BYTES,
+                super::ShadowWay::Streams => true,
+                super::ShadowWay::Packets => false,
+            };
         b
     }
 
@@ -344,8 +344,8 @@ impl<const W: usize> WideBvh<W> {
 }
 
 /// A running sum that keeps `decay.0 / decay.1` of what it held and adds
-/// `sample`; returns the new sum. For the timed and counted choices
-/// (`any_order`, `any_either_way`): concurrent samples may lose one
+/// `sample`; returns the new sum. For the counted choice of any-hit child
+/// order (`any_order`): concurrent samples may lose one
 /// another's update, and only the speed depends on these sums, never an
 /// answer.
 #[inline(always)]
@@ -418,11 +418,14 @@ impl<const W: usize> Traversal for WideBvh<W> {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
             // SAFETY: `avx` is only set when the CPU has AVX2.
+            use super::BatchWay;
             return unsafe {
-                if self.interleave {
-                    self.closest_interleaved_avx(rays, hits)
-                } else {
-                    self.closest_all_avx(rays, hits)
+                match self.batch {
+                    BatchWay::Streams if W == 8 => self.closest_streams(rays, hits),
+                    BatchWay::Auto if W == 8 && self.streams_pay(rays) => self.closest_streams(rays, hits),
+                    BatchWay::Auto if self.interleave => self.closest_interleaved_avx(rays, hits),
+                    BatchWay::Interleaved => self.closest_interleaved_avx(rays, hits),
+                    _ => self.closest_all_avx(rays, hits),
                 }
             };
         }

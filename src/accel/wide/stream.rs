@@ -48,59 +48,18 @@ struct StreamRays {
 /// MiB) 42.2 / 25.0, beetle 23.2 / 15.4, maxplanck (3.5 MiB) 12.0 / 10.1.
 pub(super) const STREAM_MIN_BYTES: usize = 16 << 20;
 
-/// Which way an occlusion batch goes on a tree that may stream is timed:
-/// packets and streams each trace `WAY_SAMPLE` of a batch's rays (of
-/// batches of at least `WAY_MIN_BATCH`), every `WAY_REFRESH` such batches,
-/// and the rest of the batch, and the batches until the next sample, go
-/// the way whose decayed time per ray (`WAY_DECAY`) is lower. Neither way
-/// wins everywhere (1 thread, shadow Mrays/s, packets / streams):
-/// arch:2M 91.3 / 30.5 and stadium:2M 20.6 / 19.0, whose packets are tight
-/// swept boxes, but sphere:5M 3.22 / 4.07 and grass:500k 0.51 / 0.89,
-/// whose rays start among dense small triangles and share nodes without
-/// sharing a tight box.
-const WAY_MIN_BATCH: usize = 1024;
-const WAY_SAMPLE: usize = 256;
-const WAY_REFRESH: u32 = 16;
-const WAY_DECAY: (u32, u32) = (3, 4);
-
+/// Which way a tree's occlusion batches go is fixed when it is built
+/// (`WideBvh::stream_shadows`): streams where its rays are expected to
+/// miss the caches (the test that interleaves its incoherent closest-hit
+/// batches, `interleave_pays`), packets elsewhere. Neither way wins
+/// everywhere, and that test separates them (1 thread, shadow Mrays/s,
+/// packets / streams, 2-vCPU AMD EPYC, 2026-11-28): sphere:1M 4.35 / 6.39,
+/// sphere:5M 2.30 / 3.41, subdiv:bunny:1.5M 3.73 / 5.21, grass:500k
+/// 0.35 / 0.66 (rays start among dense small triangles and share nodes
+/// without sharing a tight box: interleaved) against arch:2M 49.4 / 13.6
+/// and stadium:2M 14.9 / 14.8 (large triangles over empty space, whose
+/// packets are tight swept boxes: not interleaved).
 impl<const W: usize> WideBvh<W> {
-    /// `any_packet_way` or `any_streams`, as timed (see `WAY_SAMPLE`; the
-    /// build options' `ShadowWay` can fix the way, for measurements). The answers are the same either way; only the speed
-    /// depends on the timing, so on the order the threads call in.
-    ///
-    /// # Safety
-    /// As `any_streams`.
-    #[inline(always)]
-    pub(super) unsafe fn any_either_way<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool], order: ChildOrder) {
-        use std::sync::atomic::Ordering::Relaxed;
-        match self.forced_shadow_way {
-            1 => return self.any_packet_way::<WIDE>(rays, out, order),
-            2 => return self.any_streams(rays, out, order),
-            _ => {}
-        }
-        let kept = self.shadow_way.load(Relaxed);
-        if rays.len() < WAY_MIN_BATCH || (kept != 0 && self.way_calls.fetch_add(1, Relaxed) % WAY_REFRESH != 0) {
-            return if kept == 2 { self.any_streams(rays, out, order) } else { self.any_packet_way::<WIDE>(rays, out, order) };
-        }
-        let (a, b) = (WAY_SAMPLE, 2 * WAY_SAMPLE);
-        let t0 = std::time::Instant::now();
-        self.any_packet_way::<WIDE>(&rays[..a], &mut out[..a], order);
-        let t1 = std::time::Instant::now();
-        self.any_streams(&rays[a..b], &mut out[a..b], order);
-        let t2 = std::time::Instant::now();
-        // Nanoseconds for the sample, decayed into the running sums.
-        let ns = |d: std::time::Duration| d.as_nanos().min(u32::MAX as u128 / 8) as u32;
-        let packets = super::decayed_sum(&self.way_time[0], ns(t1 - t0), WAY_DECAY);
-        let streams = super::decayed_sum(&self.way_time[1], ns(t2 - t1), WAY_DECAY);
-        let way = if streams < packets { 2 } else { 1 };
-        self.shadow_way.store(way, Relaxed);
-        if way == 2 {
-            self.any_streams(&rays[b..], &mut out[b..], order)
-        } else {
-            self.any_packet_way::<WIDE>(&rays[b..], &mut out[b..], order)
-        }
-    }
-
     /// `out[i]` = whether `rays[i]` is occluded, in streams of up to
     /// `STREAM` rays of one octant each.
     ///
@@ -238,11 +197,11 @@ impl<const W: usize> WideBvh<W> {
                 while m != 0 {
                     let k = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    ready(k, &mut setup, &mut rts, &mut shears, rays, &s);
+                    ready(k, &mut setup, &mut rts, &mut shears, rays, s.index[k]);
                     if m != 0 && leaf.n_spheres == 0 {
                         let j = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        ready(j, &mut setup, &mut rts, &mut shears, rays, &s);
+                        ready(j, &mut setup, &mut rts, &mut shears, rays, s.index[j]);
                         let found = self.leaf_pair_any(&leaf, [rts[k].assume_init_ref(), rts[j].assume_init_ref()], [shears[k].assume_init_ref(), shears[j].assume_init_ref()], [s.tmin[k], s.tmin[j]], [s.tmax[k], s.tmax[j]]);
                         for (q, f) in [k, j].into_iter().zip(found) {
                             if f {
@@ -275,10 +234,10 @@ impl<const W: usize> WideBvh<W> {
 /// Make ray `k`'s triangle-test constants the first time it reaches a
 /// leaf (bit `k` of `setup`).
 #[inline(always)]
-fn ready(k: usize, setup: &mut u64, rts: &mut [MaybeUninit<RayTransform>; STREAM], shears: &mut [MaybeUninit<Shear>; STREAM], rays: &[Ray], s: &StreamRays) {
+pub(super) fn ready(k: usize, setup: &mut u64, rts: &mut [MaybeUninit<RayTransform>; STREAM], shears: &mut [MaybeUninit<Shear>; STREAM], rays: &[Ray], index: u32) {
     if *setup >> k & 1 == 0 {
         *setup |= 1 << k;
-        let r = &rays[s.index[k] as usize];
+        let r = &rays[index as usize];
         let rt = RayTransform::new(r.origin, r.dir);
         shears[k].write(Shear::new(&rt));
         rts[k].write(rt);
@@ -370,23 +329,21 @@ mod tests {
         }
     }
 
-    /// A tree that may stream times both ways on a large batch, keeps the
-    /// faster, and answers as single rays whichever way each batch went.
+    /// Both ways answer as single rays on a tree that streams.
     #[test]
-    fn the_timed_choice_of_way_keeps_the_answers() {
+    fn packets_and_streams_answer_alike() {
         if !avx_or_skip("the occlusion streams") {
             return;
         }
         let shapes = shapes();
         let rays = rays(&shapes);
         let mut bvh = WideBvh::<8>::build(&shapes);
-        bvh.stream_shadows = true;
         let want: Vec<bool> = rays.iter().map(|r| bvh.occluded(r)).collect();
-        for round in 0..3 {
+        for streams in [false, true] {
+            bvh.stream_shadows = streams;
             let mut got = vec![false; rays.len()];
             bvh.occluded_coherent(&rays, &mut got);
-            assert_eq!(got, want, "round {round}");
-            assert_ne!(bvh.shadow_way.load(std::sync::atomic::Ordering::Relaxed), 0, "no way was chosen");
+            assert_eq!(got, want, "streams {streams}");
         }
     }
 }

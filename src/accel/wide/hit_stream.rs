@@ -1,0 +1,301 @@
+//! Incoherent closest-hit batches as *streams*: the batch's rays grouped by
+//! the sign pattern of their directions (octant), in batch order, into
+//! streams of up to 64, each stream traced together with a mask of the rays
+//! that entered each stacked node — the closest-hit twin of the occlusion
+//! streams (`stream`). A node some of a stream's rays entered is fetched
+//! once for all of them and each of those rays tests its 8 boxes (one AVX2
+//! test per ray, the single-ray test's operations) with its own current
+//! closest distance; a leaf is tested by each ray that entered it. Where a
+//! batch's rays start near one another (a tile's bounce rays), they share
+//! most of their node fetches; where they do not (rays from anywhere in the
+//! scene), the stream costs more than single rays.
+//!
+//! Answers equal single-ray traversal's: each ray tests every triangle
+//! whose leaf box it enters within its current closest distance, with the
+//! watertight test and the same tie-break (`closer`), so its closest hit is
+//! the same whatever order the leaves come in.
+
+use super::kernels::{slab_planes, Slab};
+use super::stream::STREAM;
+use super::triangle::Shear;
+use super::{WideBvh, EMPTY, LEAF_BIT, STACK};
+use crate::accel::prims::closer;
+use crate::accel::Hit;
+use crate::geometry::RayTransform;
+use crate::ray::Ray;
+use std::mem::MaybeUninit;
+
+/// A stream's rays: their indices in the batch, their slab constants in
+/// SoA form, and their current closest distances.
+struct StreamRays {
+    index: [u32; STREAM],
+    o: [[f32; STREAM]; 3],
+    inv: [[f32; STREAM]; 3],
+    tmin: [f32; STREAM],
+    tmax: [f32; STREAM],
+    /// `tmax` enlarged by `ROBUST_SCALE`, as the slab test enlarges it.
+    far: [f32; STREAM],
+}
+
+/// Batches of fewer rays never stream: a stream of one octant's few rays
+/// shares little.
+pub(super) const STREAM_MIN_RAYS: usize = 128;
+
+/// A batch streams when the mean distance between consecutive rays'
+/// origins is under this share of the tree's diagonal: its rays start
+/// close together, so streams of them share their nodes.
+pub(super) const COHERENT_STEP: f32 = 1.0 / 32.0;
+
+impl<const W: usize> WideBvh<W> {
+    /// Whether `rays` go in streams (`closest_streams`) rather than one at
+    /// a time: decided from the batch alone (so the same batch always
+    /// takes the same way), by how far apart consecutive rays start.
+    pub(super) fn streams_pay(&self, rays: &[Ray]) -> bool {
+        if rays.len() < STREAM_MIN_RAYS {
+            return false;
+        }
+        let (mut sum, mut steps) = (0.0f32, 0u32);
+        let mut prev: Option<glam::Vec3> = None;
+        for r in rays.iter().filter(|r| r.is_valid()) {
+            if let Some(p) = prev {
+                sum += (r.origin - p).length();
+                steps += 1;
+            }
+            prev = Some(r.origin);
+        }
+        steps as usize >= STREAM_MIN_RAYS && sum < steps as f32 * COHERENT_STEP * self.root_diagonal
+    }
+
+    /// `hits[i]` = the closest hit of `rays[i]`, in streams of up to
+    /// `STREAM` rays of one octant each.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and the caller must be compiled with it; `W`
+    /// must be 8.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest_streams(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        debug_assert!(W == 8);
+        if self.root & LEAF_BIT != 0 || self.root == EMPTY {
+            return self.closest_all::<true>(rays, hits);
+        }
+        let mut waiting = [[0u32; STREAM]; 8];
+        let mut count = [0usize; 8];
+        for (i, r) in rays.iter().enumerate() {
+            hits[i] = None;
+            if !r.is_valid() {
+                continue;
+            }
+            let oct = (r.dir.x.is_sign_negative() as usize) | (r.dir.y.is_sign_negative() as usize) << 1 | (r.dir.z.is_sign_negative() as usize) << 2;
+            waiting[oct][count[oct]] = i as u32;
+            count[oct] += 1;
+            if count[oct] == STREAM {
+                self.closest_stream(rays, &waiting[oct][..STREAM], oct, hits);
+                count[oct] = 0;
+            }
+        }
+        for oct in 0..8 {
+            if count[oct] > 0 {
+                self.closest_stream(rays, &waiting[oct][..count[oct]], oct, hits);
+            }
+        }
+    }
+
+    /// One stream: `which` (at most `STREAM` indices into `rays`, all valid,
+    /// all of octant `oct`).
+    #[inline(always)]
+    unsafe fn closest_stream(&self, rays: &[Ray], which: &[u32], oct: usize, hits: &mut [Option<Hit>]) {
+        use std::arch::x86_64::*;
+        let n = which.len();
+        let mut s = StreamRays { index: [0; STREAM], o: [[0.0; STREAM]; 3], inv: [[0.0; STREAM]; 3], tmin: [0.0; STREAM], tmax: [0.0; STREAM], far: [0.0; STREAM] };
+        for (k, &i) in which.iter().enumerate() {
+            let r = &rays[i as usize];
+            let slab = Slab::new(r);
+            s.index[k] = i;
+            for a in 0..3 {
+                s.o[a][k] = slab.o[a];
+                s.inv[a][k] = slab.inv[a];
+            }
+            s.tmin[k] = r.tmin;
+            s.tmax[k] = r.tmax;
+            s.far[k] = r.tmax * crate::accel::bvh::ROBUST_SCALE;
+        }
+        let mut best: [Option<Hit>; STREAM] = [None; STREAM];
+        let near_plane = [0, 1, 2].map(|a| if oct >> a & 1 != 0 { 3 + a } else { a });
+        let far_plane = near_plane.map(|p| (p + 3) % 6);
+        let all: u64 = if n == STREAM { u64::MAX } else { (1u64 << n) - 1 };
+        let mut setup: u64 = 0;
+        let mut rts: [MaybeUninit<RayTransform>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
+        let mut shears: [MaybeUninit<Shear>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
+        let mut stack = super::CacheAligned([MaybeUninit::<(u32, f32, u64)>::uninit(); STACK]);
+        let stack = &mut stack.0;
+        let mut sp = 0;
+        let (mut code, mut entered) = (self.root, all);
+        let inf = _mm256_set1_ps(f32::INFINITY);
+        loop {
+            let node = &self.nodes[code as usize];
+            let rows = node.bounds.as_ptr() as *const f32;
+            let load = |p: usize| _mm256_load_ps(rows.add(p * W));
+            let lo = [load(near_plane[0]), load(near_plane[1]), load(near_plane[2])];
+            let hi = [load(far_plane[0]), load(far_plane[1]), load(far_plane[2])];
+            let mut masks = [_mm256_setzero_si256(); 2];
+            let mut near = inf;
+            for (half, m) in masks.iter_mut().enumerate() {
+                let mut t = (entered >> (32 * half)) as u32;
+                while t != 0 {
+                    let r = t.trailing_zeros() as usize;
+                    t &= t - 1;
+                    let i = 32 * half + r;
+                    let (t0, t1) = slab_planes::<__m256>(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.far[i]);
+                    let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
+                    *m = _mm256_or_si256(*m, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << r)));
+                    near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));
+                }
+            }
+            let none = _mm256_cmpeq_epi32(_mm256_or_si256(masks[0], masks[1]), _mm256_setzero_si256());
+            let entered_children = !_mm256_movemask_ps(_mm256_castsi256_ps(none)) as u32 & 0xff;
+            if entered_children != 0 {
+                let mut child_rays = [[0u32; 8]; 2];
+                let mut child_near = [0.0f32; 8];
+                _mm256_storeu_si256(child_rays[0].as_mut_ptr() as *mut __m256i, masks[0]);
+                _mm256_storeu_si256(child_rays[1].as_mut_ptr() as *mut __m256i, masks[1]);
+                _mm256_storeu_ps(child_near.as_mut_ptr(), near);
+                let mut b = entered_children;
+                while b != 0 {
+                    let lane = b.trailing_zeros() as usize;
+                    b &= b - 1;
+                    self.prefetch(node.child[lane]);
+                }
+                let base = sp;
+                let mut b = entered_children;
+                while b != 0 {
+                    let lane = b.trailing_zeros() as usize;
+                    b &= b - 1;
+                    let child = node.child[lane];
+                    let r = child_rays[0][lane] as u64 | (child_rays[1][lane] as u64) << 32;
+                    if r == 0 || child == EMPTY {
+                        continue;
+                    }
+                    if child & LEAF_BIT == 0 {
+                        stack[sp].write((child, child_near[lane], r));
+                        sp += 1;
+                        continue;
+                    }
+                    let leaf = self.leaf_of(child);
+                    let mut m = r;
+                    while m != 0 {
+                        let k = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        super::stream::ready(k, &mut setup, &mut rts, &mut shears, rays, s.index[k]);
+                        let ray = &rays[s.index[k] as usize];
+                        let (b, t) = (&mut best[k], &mut s.tmax[k]);
+                        self.leaf(&leaf, ray, rts[k].assume_init_ref(), shears[k].assume_init_ref(), *t, &mut |h: Hit| {
+                            if closer(h, b) {
+                                *t = h.t;
+                                *b = Some(h);
+                            }
+                            false
+                        });
+                        s.far[k] = s.tmax[k] * crate::accel::bvh::ROBUST_SCALE;
+                    }
+                }
+                super::kernels::sort_far_first(std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32, u64), sp - base), |e| e.1);
+            }
+            // The next stacked node that a ray entered no farther than its
+            // current closest hit.
+            loop {
+                if sp == 0 {
+                    for k in 0..n {
+                        hits[s.index[k] as usize] = best[k];
+                    }
+                    return;
+                }
+                sp -= 1;
+                let (c, d, r) = stack[sp].assume_init();
+                let mut live = 0u64;
+                let mut m = r;
+                while m != 0 {
+                    let k = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if d <= s.far[k] {
+                        live |= 1 << k;
+                    }
+                }
+                if live != 0 {
+                    (code, entered) = (c, live);
+                    break;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::{avx_or_skip, rays, shapes};
+    use super::*;
+    use crate::accel::brute::BruteForce;
+    use crate::accel::Traversal;
+    use crate::bench::{camera_rays, diffuse_rays, load_bench_scene, tile_order};
+    use crate::camera::Camera;
+
+    /// `closest_streams` as its callers run it (compiled with AVX2).
+    fn streams(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        // SAFETY: the tests call this only after `avx_or_skip`.
+        unsafe { bvh.closest_streams(rays, hits) }
+    }
+
+    /// Streams find brute force's closest hits: meshes and a sphere in one
+    /// tree, camera, random and tight rays of every octant, short rays,
+    /// rays starting inside boxes, invalid rays among them; batches of
+    /// every size from one ray to all of them.
+    #[test]
+    fn closest_streams_match_brute_force() {
+        if !avx_or_skip("the closest-hit streams") {
+            return;
+        }
+        let shapes = shapes();
+        let rays = rays(&shapes);
+        let brute = BruteForce::new(&shapes);
+        let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
+        assert!(want.iter().filter(|h| h.is_some()).count() > 1000 && want.iter().filter(|h| h.is_none()).count() > 1000);
+        let bvh = WideBvh::<8>::build(&shapes);
+        for chunk in [rays.len(), 4096, 777, 64, 65, 3, 1] {
+            let mut got = vec![None; rays.len()];
+            for (r, h) in rays.chunks(chunk).zip(got.chunks_mut(chunk)) {
+                streams(&bvh, r, h);
+            }
+            let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
+            assert_eq!(bad, 0, "batches of {chunk}: {bad} hits differ from brute force");
+        }
+    }
+
+    /// On bench scenes, a tile's diffuse rays (the batches that stream)
+    /// and random rays find exactly the single-ray hits, through the
+    /// batch call, whichever way the batch goes.
+    #[test]
+    fn streamed_diffuse_rays_find_the_single_ray_hits() {
+        if !avx_or_skip("the closest-hit streams") {
+            return;
+        }
+        for spec in ["subdiv:CBbunny:100k", "grass:30k", "arch:50k"] {
+            let scene = load_bench_scene(spec).unwrap();
+            let bvh = WideBvh::<8>::build(&scene.shapes);
+            let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
+            let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
+            let random = crate::bench::random_rays(&scene, 4096, 2);
+            for (what, rays) in [("diffuse", &diffuse), ("random", &random)] {
+                let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
+                let mut via_streams = vec![None; rays.len()];
+                let mut via_batch = vec![None; rays.len()];
+                for ((r, s), b) in rays.chunks(1024).zip(via_streams.chunks_mut(1024)).zip(via_batch.chunks_mut(1024)) {
+                    streams(&bvh, r, s);
+                    bvh.intersect_batch(r, b);
+                }
+                assert!(via_streams == want, "{spec} {what}: streamed hits differ from single rays");
+                assert!(via_batch == want, "{spec} {what}: batch hits differ from single rays");
+            }
+            assert!(bvh.streams_pay(&diffuse[..1024]), "{spec}: a tile's diffuse rays do not stream");
+            assert!(!bvh.streams_pay(&random[..1024]), "{spec}: random rays stream");
+        }
+    }
+}
