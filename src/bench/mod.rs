@@ -82,7 +82,7 @@ pub const DEFAULT_SCENES: [&str; 11] =
 /// Path-traced render timing (the benchmark's last table): these scenes at
 /// 480x360, 64 spp, -m 5, every backend but brute, same seed. CBspheres (mirror
 /// and glass spheres) and CBgems (glass meshes) time the delta-BSDF paths.
-pub const RENDER_SCENES: [&str; 4] = ["CBbunny", "CBspheres_lambertian", "CBspheres", "CBgems"];
+pub const RENDER_SCENES: [&str; 5] = ["CBbunny", "CBspheres_lambertian", "CBspheres", "CBgems", "subdiv:CBbunny:1M"];
 
 /// Brute force is skipped above this many primitives (hours per measurement).
 const BRUTE_LIMIT: usize = 100_000;
