@@ -1,4 +1,4 @@
-//! The long fuzz run, and the corpus's generator (`pathtracer::fuzz`).
+//! The long fuzz run, and the corpus's generator (`pathtracer::app::fuzz`).
 //!
 //! ```sh
 //! cargo run --release --example fuzz -- --cases 1000000            # every reader
@@ -17,9 +17,9 @@
 
 /// Every allocation counted per thread, so a case's memory is its own.
 #[global_allocator]
-static ALLOC: pathtracer::fuzz::alloc::CountingAlloc = pathtracer::fuzz::alloc::CountingAlloc::new();
+static ALLOC: pathtracer::app::fuzz::alloc::CountingAlloc = pathtracer::app::fuzz::alloc::CountingAlloc::new();
 
-use pathtracer::fuzz::{self, Kind, Outcome, Report};
+use pathtracer::app::fuzz::{self, Kind, Outcome, Report};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -466,8 +466,8 @@ mod corpus {
                 let mut a: Vec<String> = vec!["pathtracer".into()];
                 a.extend(args.iter().map(|s| s.to_string()));
                 a.extend(["-t".into(), "1".into(), "--part".into(), format!("{i}/2"), "--partial".into(), file.to_string_lossy().into_owned()]);
-                let cli = pathtracer::cli::parse(&a)?.expect("render arguments");
-                pathtracer::cli::run(cli)?;
+                let cli = pathtracer::app::cli::parse(&a)?.expect("render arguments");
+                pathtracer::app::cli::run(cli)?;
             }
         }
         Ok(())

@@ -11,7 +11,8 @@
 
 use clap::ValueEnum;
 use pathtracer::accel::{self, BackendKind};
-use pathtracer::bench::{camera_rays, load_bench_scene, random_rays, shadow_rays};
+use pathtracer::accel::workloads::{camera_rays, random_rays, shadow_rays};
+use pathtracer::app::bench::load_bench_scene;
 use pathtracer::camera::Camera;
 use std::time::Instant;
 

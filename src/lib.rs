@@ -21,12 +21,16 @@
 //!    over tiles on rayon's pool; every random number is addressed by (pixel,
 //!    sample, dimension) ([`sampler`]), and every pixel keeps exact fixed-point
 //!    sums ([`render::sums`]), so the image is the same at any thread count and
-//!    in any split of the work ([`partial`], [`merge`]).
+//!    in any split of the work ([`partial`]).
 //! 5. [`image_io`] writes the PNG (CS184's tone step), the rate image and OpenEXR.
 //!
-//! [`cli::parse`] and [`cli::run`] are the command line the binary runs, with
-//! every flag checked; the documentation in `docs/` describes each piece
-//! (`docs/design/modules.md` is the module map).
+//! Those modules are the library: they know nothing of the command line, the
+//! benchmark or the environment, and take every option as a value. [`app`]
+//! is the application built on them: [`app::cli::parse`] and
+//! [`app::cli::run`] are the command line the binary runs, with every flag
+//! checked; the benchmark, split renders' merge, the export for the
+//! reference renderers and the fuzzer live beside it. The documentation in
+//! `docs/` describes each piece (`docs/design/modules.md` is the module map).
 //!
 //! # Example: render the built-in scene into an image buffer
 //!
@@ -63,17 +67,14 @@
 //! ```
 
 pub mod accel;
-pub mod bench;
+pub mod app;
 pub mod bsdf;
 pub mod camera;
-pub mod cli;
+pub mod color;
 pub mod error;
-pub mod export;
-pub mod fuzz;
 pub mod geometry;
 pub mod image_io;
 pub mod light;
-pub mod merge;
 pub mod metrics;
 pub mod partial;
 pub mod ray;

@@ -1,3 +1,3 @@
 fn main() -> std::process::ExitCode {
-    pathtracer::cli::main()
+    pathtracer::app::cli::main()
 }

@@ -28,7 +28,7 @@
 //! saying so.
 //!
 //! Splats: a render whose integrator lands light on other pixels
-//! (`integrator bdpt` or `light` in the header, `Header::has_splats`) stores
+//! (`IntegratorSpec::splats` of the header's `integrator`) stores
 //! after its pixel records the film of splats of the whole region
 //! (`SplatSums::BYTES` per pixel, row-major, every pixel), which `merge`
 //! adds as exactly as the pixel sums; the `records` checksum covers both.
@@ -119,10 +119,11 @@ impl Header {
         }
     }
 
-    /// Whether the part stores a film of splats after its pixel records
-    /// (integrators that trace from the lights).
+    /// Whether the part stores a film of splats after its pixel records:
+    /// whether its integrator (`IntegratorSpec::splats`) lands light on
+    /// other pixels.
     pub fn has_splats(&self) -> bool {
-        matches!(self.get("integrator"), Some("bdpt" | "light"))
+        self.get("integrator").and_then(crate::render::integrator::IntegratorSpec::splats_by_name).unwrap_or(false)
     }
 
     /// The frame's pixel count (width × height; a region is a part of it).

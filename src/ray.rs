@@ -1,4 +1,5 @@
-//! Rays and the validity rule every backend applies to them.
+//! Rays, the validity rule every backend applies to them, and what a
+//! backend finds along one (`Hit`).
 
 use glam::Vec3;
 
@@ -44,5 +45,26 @@ impl Ray {
             && self.tmin >= 0.0
             && !self.tmax.is_nan()
             && self.tmin <= self.tmax
+    }
+}
+
+/// What a backend knows about a hit. Geometry ids number the scene's shapes in
+/// order (`Scene::shapes`); the primitive id is the triangle index inside its
+/// mesh (0 for a sphere). `u`, `v` are the barycentric weights of the
+/// triangle's second and third vertices (0 for spheres).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub u: f32,
+    pub v: f32,
+    pub geom_id: u32,
+    pub prim_id: u32,
+}
+
+impl Hit {
+    /// The order used to break exact ties in `t`: lower (geometry, primitive) wins.
+    #[inline]
+    pub fn key(&self) -> u64 {
+        ((self.geom_id as u64) << 32) | self.prim_id as u64
     }
 }

@@ -5,7 +5,7 @@
 mod common;
 
 use pathtracer::accel::{BackendKind, Hit};
-use pathtracer::bench::{camera_rays, random_rays, shadow_rays};
+use pathtracer::accel::workloads::{camera_rays, random_rays, shadow_rays};
 use pathtracer::camera::Camera;
 
 #[test]

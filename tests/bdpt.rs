@@ -461,7 +461,7 @@ fn every_shipped_scene_renders_with_bdpt_and_light_tracing_on_every_fast_backend
     let mut rendered = Vec::new();
     for path in common::shipped_scenes() {
         let (scene, cam) = shrunk(common::load(&path), 40, 30);
-        pathtracer::cli::check_materials(&scene).unwrap_or_else(|e| panic!("{}: refused: {e}", path.display()));
+        scene.check_materials().unwrap_or_else(|e| panic!("{}: refused: {e}", path.display()));
         for &backend in &backends {
             for est in [Estimator::Bdpt(Technique::Bidirectional), Estimator::BdptSpecular(Technique::Bidirectional), Estimator::Bdpt(Technique::LightTracing)] {
                 render_image(&scene, &cam, backend, est, 5, true, 2, 13);

@@ -4,7 +4,7 @@
 mod common;
 
 use pathtracer::accel::BackendKind;
-use pathtracer::bench::{camera_rays, random_rays};
+use pathtracer::accel::workloads::{camera_rays, random_rays};
 use pathtracer::camera::Camera;
 use pathtracer::ray::Ray;
 use rayon::prelude::*;

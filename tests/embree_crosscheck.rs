@@ -9,7 +9,7 @@
 mod common;
 
 use pathtracer::accel::{BackendKind, Hit, Traversal};
-use pathtracer::bench::{camera_rays, random_rays};
+use pathtracer::accel::workloads::{camera_rays, random_rays};
 use pathtracer::camera::Camera;
 use pathtracer::ray::Ray;
 use pathtracer::render::{self, normals::NormalShading, RenderSettings};
@@ -164,7 +164,7 @@ fn batches_match_single_rays(kind: BackendKind) {
     let mut rays = camera_rays(&Camera::from_scene(&scene), 64, 48);
     rays.extend(random_rays(&scene, 3000, 5));
     // The benchmark's shadow rays: from camera hits towards one point.
-    let shadows = pathtracer::bench::shadow_rays(&scene, &embree, &camera_rays(&Camera::from_scene(&scene), 64, 48));
+    let shadows = pathtracer::accel::workloads::shadow_rays(&scene, &embree, &camera_rays(&Camera::from_scene(&scene), 64, 48));
     rays.extend(shadows);
     // Invalid rays inside a batch must not disturb their neighbours.
     rays[7].dir = glam::Vec3::ZERO;

@@ -1,4 +1,4 @@
-//! The mutation fuzzer in the suite (`pathtracer::fuzz`): every seed input
+//! The mutation fuzzer in the suite (`pathtracer::app::fuzz`): every seed input
 //! renders unmutated; a few thousand mutated cases over every reader, fixed
 //! seed, end rendered or refused by name with nothing left behind (no
 //! panic, no hang, no stray file); and every input that ever failed
@@ -7,9 +7,9 @@
 
 /// Every allocation counted per thread, so a case's memory is its own.
 #[global_allocator]
-static ALLOC: pathtracer::fuzz::alloc::CountingAlloc = pathtracer::fuzz::alloc::CountingAlloc::new();
+static ALLOC: pathtracer::app::fuzz::alloc::CountingAlloc = pathtracer::app::fuzz::alloc::CountingAlloc::new();
 
-use pathtracer::fuzz::{self, Kind, Outcome};
+use pathtracer::app::fuzz::{self, Kind, Outcome};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Duration;

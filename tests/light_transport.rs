@@ -65,7 +65,7 @@ fn sampling_routines_pass_chi_square_and_their_pdfs_integrate_to_one() {
     // sampled direction onto the light's plane, must be uniform in solid angle.
     let scene = pathtracer::scene::builtin::load().unwrap();
     let lights = Lights::from_scene(&scene).unwrap();
-    let quad = lights.lights.iter().find(|l| matches!(l, Light::Mesh { .. })).expect("the light quad is a light");
+    let quad = lights.lights.iter().find(|l| matches!(l, Light::Mesh(_))).expect("the light quad is a light");
     let (lo, hi) = light_quad_bounds(&scene, quad);
     let shading_point = Vec3::new(0.3, 0.4, -0.2);
     let (gx, gz) = (16usize, 12usize);
@@ -113,7 +113,7 @@ fn sampling_routines_pass_chi_square_and_their_pdfs_integrate_to_one() {
 
 /// The axis-aligned extent of the CB light quad (flat in y).
 fn light_quad_bounds(scene: &Scene, light: &Light) -> (Vec3, Vec3) {
-    let Light::Mesh { geom_id, .. } = light else { panic!("not a mesh light") };
+    let Light::Mesh(pathtracer::light::MeshLight { geom_id, .. }) = light else { panic!("not a mesh light") };
     let b = scene.shapes[*geom_id as usize].bounds();
     assert!((b.max.y - b.min.y).abs() < 1e-5, "the light quad is not flat in y");
     (b.min, b.max)
@@ -135,7 +135,7 @@ fn area_light_pdf_is_a_density_over_solid_angle() {
     // CS184's dist / (A cos) would be off by a factor of the distance.
     let scene = pathtracer::scene::builtin::load().unwrap();
     let lights = Lights::from_scene(&scene).unwrap();
-    let quad = lights.lights.iter().find(|l| matches!(l, Light::Mesh { .. })).unwrap();
+    let quad = lights.lights.iter().find(|l| matches!(l, Light::Mesh(_))).unwrap();
     let (lo, hi) = light_quad_bounds(&scene, quad);
     // The last point is so far below that Ω < 1e-4 sr: sampled by area.
     let points = [Vec3::new(0.3, 0.4, -0.2), Vec3::new(-0.9, 0.05, 0.9), Vec3::new(0.0, 1.2, 0.0), Vec3::new(0.1, -300.0, 0.2)];
@@ -196,7 +196,7 @@ fn mesh_lights_sample_triangles_by_solid_angle_with_a_consistent_pdf() {
     let scene = scene_of(vec![(Shape::Mesh(lamp), diffuse("lamp", 0.0, 2.0))], vec![]);
     let lights = Lights::from_scene(&scene).unwrap();
     let light = &lights.lights[0];
-    assert!(matches!(light, Light::Mesh { rect: None, spherical: true, .. }));
+    assert!(matches!(light, Light::Mesh(pathtracer::light::MeshLight { rect: None, spherical: true, .. })));
     let points = [Vec3::new(0.0, 0.6, 0.0), Vec3::new(0.8, 0.95, 0.1), Vec3::new(-2.0, -3.0, 1.0), Vec3::new(0.0, -60.0, 0.0)];
     let z = z_crit(0.01, points.len());
     let mut spherical = 0;
@@ -489,7 +489,7 @@ fn every_shipped_scene_renders_finite_on_every_fast_backend() {
     let backends: Vec<BackendKind> = common::backends().into_iter().filter(|b| *b != BackendKind::Brute).collect();
     for path in common::shipped_scenes() {
         let scene = common::load(&path);
-        pathtracer::cli::check_materials(&scene).unwrap_or_else(|e| panic!("{}: refused: {e}", path.display()));
+        scene.check_materials().unwrap_or_else(|e| panic!("{}: refused: {e}", path.display()));
         let mut cam = Camera::from_scene(&scene);
         cam.screen_dist *= 0.1;
         cam.set_screen_size(80, 60);
@@ -541,7 +541,7 @@ fn light_and_hemisphere_sampling_agree_with_microfacet_and_glass_spheres() {
     assert_eq!(spheres.len(), 2);
     scene.materials.push(pathtracer::scene::Material {
         name: "copper".into(),
-        bsdf: pathtracer::scene::Bsdf::Microfacet { alpha: 0.3, eta: Vec3::new(0.33228, 1.0162, 1.2474), k: Vec3::new(3.1646, 2.5785, 2.4603) },
+        surface: pathtracer::scene::Surface::Microfacet { alpha: 0.3, eta: Vec3::new(0.33228, 1.0162, 1.2474), k: Vec3::new(3.1646, 2.5785, 2.4603) },
         emission: Vec3::ZERO,
     });
     scene.materials.push(common::lossless_glass());

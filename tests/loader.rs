@@ -2,7 +2,7 @@
 
 mod common;
 
-use pathtracer::scene::{Bsdf, LightKind};
+use pathtracer::scene::{Surface, LightKind};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -59,15 +59,15 @@ fn cornell_box_materials_lights_and_spheres_are_as_in_the_notes() {
     centers.sort();
     assert_eq!(centers, vec![[-400, 300, -300], [400, 300, 300]]);
     assert!(spheres.iter().all(|(_, r)| (r - 0.3).abs() < 1e-6));
-    let kinds: Vec<&str> = s.objects.iter().map(|o| s.materials[o.material].bsdf.kind()).collect();
+    let kinds: Vec<&str> = s.objects.iter().map(|o| s.materials[o.material].surface.kind()).collect();
     assert_eq!(kinds.iter().filter(|k| **k == "emission").count(), 1);
-    assert!(s.materials.iter().any(|m| m.bsdf == Bsdf::Diffuse { albedo: glam::Vec3::new(0.6, 0.2, 0.2) }));
+    assert!(s.materials.iter().any(|m| m.surface == Surface::Diffuse { albedo: glam::Vec3::new(0.6, 0.2, 0.2) }));
     assert_eq!(s.lights.len(), 1);
     assert_eq!(s.lights[0].kind, LightKind::Area);
     assert_eq!(s.lights[0].radiance, glam::Vec3::splat(10.0));
     // Other scenes keep the materials later issues render.
     let s = common::load(&common::scene_path("sky", "CBspheres"));
-    let kinds: Vec<&str> = s.materials.iter().map(|m| m.bsdf.kind()).collect();
+    let kinds: Vec<&str> = s.materials.iter().map(|m| m.surface.kind()).collect();
     assert!(kinds.contains(&"mirror") && kinds.contains(&"glass"), "{kinds:?}");
     let s = common::load(&common::scene_path("sky", "CBempty"));
     assert_eq!(s.lights[0].kind, LightKind::Point);

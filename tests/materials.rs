@@ -12,11 +12,11 @@ use pathtracer::accel::BackendKind;
 use pathtracer::camera::Camera;
 use pathtracer::light::{EnvMap, Lights};
 use pathtracer::render::{self, path::{specular_guide::SpecularGuide, PathTracer}, RenderOutput, RenderSettings};
-use pathtracer::scene::{Bsdf, LightDesc, LightKind, Material, Scene, Shape, TriangleMesh};
+use pathtracer::scene::{Surface, LightDesc, LightKind, Material, Scene, Shape, TriangleMesh};
 use std::sync::Arc;
 
-fn material(name: &str, bsdf: Bsdf) -> Material {
-    Material { name: name.into(), bsdf, emission: Vec3::ZERO }
+fn material(name: &str, surface: Surface) -> Material {
+    Material { name: name.into(), surface, emission: Vec3::ZERO }
 }
 
 fn uniform_env(l: Vec3) -> Arc<EnvMap> {
@@ -66,8 +66,8 @@ fn lossless_spheres_and_boxes_vanish_in_a_uniform_environment_at_any_offset_and_
     // leak or a wrong inside/outside decision breaks the equality by tens
     // of per cent. Moved by 8192 and scaled by 1e-3 and 1e3 too.
     let l = Vec3::new(0.7, 1.0, 1.3);
-    let refraction = material("refraction", Bsdf::Refraction { transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 });
-    let mirror = material("mirror", Bsdf::Mirror { reflectance: Vec3::ONE });
+    let refraction = material("refraction", Surface::Refraction { transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 });
+    let mirror = material("mirror", Surface::Mirror { reflectance: Vec3::ONE });
     let mut checked = 0;
     for (offset, scale) in [(Vec3::ZERO, 1.0f32), (Vec3::splat(8192.0), 1.0), (Vec3::ZERO, 1e-3), (Vec3::new(-3.0, 2.0, 1.0), 1e3)] {
         let shapes: Vec<(&str, Shape, Material)> = vec![
@@ -187,7 +187,7 @@ fn environment_light_on_a_diffuse_plane_matches_quadrature_of_the_map() {
         normals: vec![Vec3::Y; 4],
     };
     let sky = LightDesc { name: "Hemi".into(), kind: LightKind::Ambient, radiance: lh, transform: glam::Mat4::IDENTITY };
-    let scene = scene_of(vec![(Shape::Mesh(plane), material("plane", Bsdf::Diffuse { albedo: Vec3::splat(rho) }))], vec![sky]);
+    let scene = scene_of(vec![(Shape::Mesh(plane), material("plane", Surface::Diffuse { albedo: Vec3::splat(rho) }))], vec![sky]);
     let cam = camera_looking(&scene, Vec3::new(0.0, 1.0, 0.0), -Vec3::Y, 20.0, 16);
     let z = z_crit(0.01, 9);
     for (hemi, spp, product) in [(false, 256u32, true), (false, 256, false), (true, 16384, true)] {
@@ -219,7 +219,7 @@ fn mirror_at_one_bounce_shows_the_light_it_reflects() {
     let (m0, m1) = (run(0), run(1));
     // Pixels whose pixel-centre ray hits the mirror sphere, black at -m 0,
     // that show the light (radiance 10) at -m 1.
-    let mirror = scene.objects.iter().position(|o| matches!(scene.materials[o.material].bsdf, Bsdf::Mirror { .. })).expect("CBspheres has a mirror");
+    let mirror = scene.objects.iter().position(|o| matches!(scene.materials[o.material].surface, Surface::Mirror { .. })).expect("CBspheres has a mirror");
     let (w, h) = (cam.screen_w, cam.screen_h);
     let mut bright = 0;
     for y in 0..h {

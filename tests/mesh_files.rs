@@ -9,7 +9,7 @@ use pathtracer::accel;
 use pathtracer::camera::Camera;
 use pathtracer::light::Lights;
 use pathtracer::render::{self, path::PathTracer, RenderSettings};
-use pathtracer::scene::{obj, ply, Bsdf, LightKind, Scene, Shape};
+use pathtracer::scene::{obj, ply, Surface, LightKind, Scene, Shape};
 use std::io::Cursor;
 
 fn parse_obj(text: &str) -> pathtracer::error::Result<Scene> {
@@ -58,7 +58,7 @@ p 3
     assert!(p.normals.iter().all(|n| (*n - Vec3::Z).length() < 1e-6), "{:?}", p.normals);
     // The documented defaults.
     assert_eq!(s.materials.len(), 1);
-    assert_eq!(s.materials[0].bsdf, Bsdf::Diffuse { albedo: Vec3::splat(0.5) });
+    assert_eq!(s.materials[0].surface, Surface::Diffuse { albedo: Vec3::splat(0.5) });
     assert!(s.objects.iter().all(|o| o.material == 0));
     assert_eq!(s.lights.len(), 1);
     assert_eq!((s.lights[0].kind, s.lights[0].radiance), (LightKind::Ambient, Vec3::ONE));
@@ -180,7 +180,7 @@ fn scenes_beyond_what_f32_ray_arithmetic_carries_are_refused_by_every_loader() {
 
 /// A lat-long sphere resting on a ground quad, every coordinate times `s`.
 fn scaled_scene_obj(s: f32) -> String {
-    let m = pathtracer::bench::lat_long_sphere(24, 12);
+    let m = pathtracer::scene::generated::lat_long_sphere(24, 12);
     let mut t = String::new();
     for p in &m.positions {
         let p = (*p + Vec3::Y) * s;

@@ -7,7 +7,8 @@
 use pathtracer::accel::obvhs_peer::ObvhsPeer;
 use pathtracer::accel::tinybvh_peer::{Build, TinyBvhPeer};
 use pathtracer::accel::{self, BackendKind, Traversal};
-use pathtracer::bench::{camera_rays, load_bench_scene, random_rays, shadow_rays};
+use pathtracer::accel::workloads::{camera_rays, random_rays, shadow_rays};
+use pathtracer::app::bench::load_bench_scene;
 use pathtracer::camera::Camera;
 
 #[test]

@@ -47,10 +47,11 @@ BOTH = ["mitsuba", "cycles"]
 ALL = BOTH + ["povray"]  # POV-Ray: direct lighting only
 
 
-BDPT = ["--integrator", "bdpt"]
+# Both light-path modes, named: `specular` is the default, `all` the other.
+BDPT = ["--integrator", "bdpt", "--bdpt-light-paths", "all"]
 
 
-BDPT_SPECULAR = BDPT + ["--bdpt-light-paths", "specular"]
+BDPT_SPECULAR = ["--integrator", "bdpt", "--bdpt-light-paths", "specular"]
 
 
 TIERS = {

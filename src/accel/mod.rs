@@ -15,35 +15,16 @@ pub mod obvhs_peer;
 pub mod tinybvh_peer;
 pub mod options;
 pub mod prims;
+pub mod workloads;
 
 pub use options::{BatchWay, BuildOptions, NativeIsa, NativeOptions, ShadowWay};
 
 use crate::error::Result;
+pub use crate::ray::Hit;
 use crate::ray::Ray;
 use crate::scene::Shape;
 use std::fmt;
 use std::time::Instant;
-
-/// What a backend knows about a hit. Geometry ids number the scene's shapes in
-/// order (`Scene::shapes`); the primitive id is the triangle index inside its
-/// mesh (0 for a sphere). `u`, `v` are the barycentric weights of the
-/// triangle's second and third vertices (0 for spheres).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Hit {
-    pub t: f32,
-    pub u: f32,
-    pub v: f32,
-    pub geom_id: u32,
-    pub prim_id: u32,
-}
-
-impl Hit {
-    /// The order used to break exact ties in `t`: lower (geometry, primitive) wins.
-    #[inline]
-    pub fn key(&self) -> u64 {
-        ((self.geom_id as u64) << 32) | self.prim_id as u64
-    }
-}
 
 /// Closest-hit and any-hit ray queries over a fixed set of shapes.
 ///
@@ -216,7 +197,7 @@ pub fn build_with(kind: BackendKind, shapes: &[Shape], options: &BuildOptions) -
         BackendKind::Brute => Box::new(brute::BruteForce::new(shapes)),
         other => {
             let (major, quality) = other.embree().expect("an Embree backend")?;
-            Box::new(embree::EmbreeBackend::build(major, shapes, threads, quality)?)
+            Box::new(embree::EmbreeBackend::build_configured(major, shapes, threads, quality, &options.embree_config)?)
         }
     };
     Ok(Built { accel, build_seconds: start.elapsed().as_secs_f64() })

@@ -1,8 +1,9 @@
 //! The choices a backend's build fixes, passed in through
 //! [`accel::build_with`](super::build_with) instead of being read from the
-//! environment inside the kernels. The command line reads the
-//! `PATHTRACER_NATIVE_*` switches once ([`NativeOptions::from_env`]); the
-//! library's users and the tests pass what they want.
+//! environment inside the kernels. The application reads the
+//! `PATHTRACER_NATIVE_*` switches once and passes them
+//! ([`BuildOptions::from_lookup`]); the library's users and the tests pass
+//! what they want.
 
 use crate::error::{Error, Result};
 
@@ -67,16 +68,12 @@ impl Default for NativeOptions {
 }
 
 impl NativeOptions {
-    /// From `PATHTRACER_NATIVE_ISA` (`sse`, `avx512`), `PATHTRACER_NATIVE_SPLITS`
-    /// (a number from 0 to 4), `PATHTRACER_NATIVE_SHADOW` (`packets`,
-    /// `streams`, `auto`) and `PATHTRACER_NATIVE_BATCH` (`single`,
-    /// `interleaved`, `streams`, `auto`); a value outside these is refused,
-    /// naming the switch.
-    pub fn from_env() -> Result<NativeOptions> {
-        Self::from_lookup(|k| std::env::var(k).ok())
-    }
-
-    /// As `from_env`, with the switches' values from `lookup`.
+    /// From the values `lookup` gives `PATHTRACER_NATIVE_ISA` (`sse`,
+    /// `avx512`), `PATHTRACER_NATIVE_SPLITS` (a number from 0 to 4),
+    /// `PATHTRACER_NATIVE_SHADOW` (`packets`, `streams`, `auto`) and
+    /// `PATHTRACER_NATIVE_BATCH` (`single`, `interleaved`, `streams`,
+    /// `auto`); a value outside these is refused, naming the switch. The
+    /// application passes the environment's (`app::environment`).
     pub fn from_lookup(lookup: impl Fn(&str) -> Option<String>) -> Result<NativeOptions> {
         let var = |k: &str| lookup(k).filter(|v| !v.is_empty());
         let mut o = NativeOptions::default();
@@ -116,11 +113,24 @@ impl NativeOptions {
 }
 
 /// Everything a build takes besides the backend and the shapes.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct BuildOptions {
     /// Threads of any pool the backend owns (Embree's TBB); 0: all cores.
     pub threads: usize,
     pub native: NativeOptions,
+    /// Appended to every Embree device's configuration (for measurements:
+    /// "verbose=2" prints its BVH statistics); empty by default.
+    pub embree_config: String,
+}
+
+impl BuildOptions {
+    /// The build options the environment asks for: the
+    /// `PATHTRACER_NATIVE_*` switches and `PATHTRACER_EMBREE_CONFIG`, read
+    /// once by the application and passed in.
+    pub fn from_lookup(threads: usize, lookup: impl Fn(&str) -> Option<String>) -> Result<BuildOptions> {
+        let native = NativeOptions::from_lookup(&lookup)?;
+        Ok(BuildOptions { threads, native, embree_config: lookup("PATHTRACER_EMBREE_CONFIG").unwrap_or_default() })
+    }
 }
 
 #[cfg(test)]

@@ -64,19 +64,19 @@ impl Bsdf {
     /// The model of `m` seen from the outside (`front`) or the inside;
     /// `None` for materials that do not scatter (emitters: CS184's
     /// EmissionBSDF has f = 0).
-    pub fn of(m: &material::Bsdf, front: bool) -> Option<Bsdf> {
+    pub fn of(m: &material::Surface, front: bool) -> Option<Bsdf> {
         Some(match *m {
-            material::Bsdf::Diffuse { albedo } => {
+            material::Surface::Diffuse { albedo } => {
                 if albedo == Vec3::ZERO {
                     return None;
                 }
                 Bsdf::Diffuse(Diffuse { albedo })
             }
-            material::Bsdf::Emission { .. } => return None,
-            material::Bsdf::Mirror { reflectance } => Bsdf::Mirror(Mirror { reflectance }),
-            material::Bsdf::Glass { reflectance, transmittance, ior, .. } => Bsdf::Glass(Glass { reflectance, transmittance, ior, front }),
-            material::Bsdf::Refraction { transmittance, ior, .. } => Bsdf::Refraction(Refraction { transmittance, ior, front }),
-            material::Bsdf::Microfacet { alpha, eta, k } => Bsdf::Microfacet(Microfacet { alpha, eta, k, front }),
+            material::Surface::Emission { .. } => return None,
+            material::Surface::Mirror { reflectance } => Bsdf::Mirror(Mirror { reflectance }),
+            material::Surface::Glass { reflectance, transmittance, ior, .. } => Bsdf::Glass(Glass { reflectance, transmittance, ior, front }),
+            material::Surface::Refraction { transmittance, ior, .. } => Bsdf::Refraction(Refraction { transmittance, ior, front }),
+            material::Surface::Microfacet { alpha, eta, k } => Bsdf::Microfacet(Microfacet { alpha, eta, k, front }),
         })
     }
 

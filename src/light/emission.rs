@@ -24,10 +24,10 @@
 //! connection, so both strategies' densities agree in the MIS weights.
 
 use super::{EnvAt, Light};
-use crate::sampling::{concentric_disk, cosine_hemisphere, magnitude, uniform_sphere, uniform_triangle, Frame};
-use crate::scene::{Scene, Shape};
-use glam::Vec3;
+use crate::sampling::{concentric_disk, Frame};
 use std::f32::consts::PI;
+use crate::scene::Scene;
+use glam::Vec3;
 
 /// A ray leaving a light.
 #[derive(Clone, Copy, Debug)]
@@ -75,122 +75,58 @@ impl Light {
     /// Whether this light lies at infinity (directional, hemisphere,
     /// environment map): rays from it start on the `World` disk.
     pub fn is_at_infinity(&self) -> bool {
-        matches!(self, Light::Directional { .. } | Light::Hemisphere { .. } | Light::Environment(_))
+        self.kind().is_at_infinity()
     }
 
     /// For a light at infinity, the solid-angle density with which
     /// `sample_emission` (and next-event estimation) picks direction
     /// `to_light`; 1 for the directional light's delta.
     pub fn infinite_pdf_dir(&self, to_light: Vec3) -> f32 {
-        match self {
-            Light::Directional { .. } => 1.0,
-            _ => self.pdf_escape(to_light, EnvAt::Map),
-        }
+        self.kind().infinite_pdf_dir(to_light)
     }
 
     /// Whether a ray can hit this light (an emissive surface of the scene):
     /// a camera path can then find it by chance, the strategy `s = 0`.
     pub fn is_hittable(&self) -> bool {
-        matches!(self, Light::Mesh { .. } | Light::Sphere { .. })
+        self.kind().is_hittable()
     }
 
     /// The scene geometry this light is (an emissive mesh's id), or
     /// `u32::MAX` for lights that are not a mesh.
     pub fn geometry(&self) -> u32 {
-        match self {
-            Light::Mesh { geom_id, .. } => *geom_id,
-            _ => u32::MAX,
-        }
+        self.kind().geometry()
     }
 
     /// Emitted power (luminance-weighted): what the light choice is
     /// proportional to. Lights at infinity: the power entering the scene's
     /// bounding sphere, πR² × irradiance (directional) or × ∫L dω.
     pub fn power(&self, world: &World) -> f32 {
-        let lum = |c: Vec3| crate::render::illuminance(c).max(0.0);
-        match self {
-            Light::Point { intensity, .. } => 4.0 * PI * lum(*intensity),
-            Light::Rect { ex, ey, radiance, .. } => PI * ex.cross(*ey).length() * lum(*radiance),
-            Light::Mesh { area, radiance, .. } => PI * area * lum(*radiance),
-            Light::Sphere { radius, radiance, .. } => PI * 4.0 * PI * radius * radius * lum(*radiance),
-            Light::Directional { irradiance, .. } => lum(*irradiance) / world.disk_pdf(),
-            Light::Hemisphere { radiance, .. } => 2.0 * PI * lum(*radiance) / world.disk_pdf(),
-            Light::Environment(e) => {
-                // ∫ L dω by the midpoint rule over 128 × 64 (θ, φ) cells.
-                let (nt, np) = (64, 128);
-                let (dt, dp) = (PI / nt as f32, 2.0 * PI / np as f32);
-                let mut sum = 0.0f64;
-                for i in 0..nt {
-                    let theta = (i as f32 + 0.5) * dt;
-                    for j in 0..np {
-                        let phi = (j as f32 + 0.5) * dp;
-                        let d = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
-                        sum += (lum(e.eval(d)) * theta.sin() * dt * dp) as f64;
-                    }
-                }
-                sum as f32 / world.disk_pdf()
-            }
-        }
+        self.kind().power(world)
     }
 
     /// Area density with which `sample_emission` picks its points (1 for a
     /// point light; per area of the `World` disk for lights at infinity).
     pub fn emission_pdf_pos(&self, world: &World) -> f32 {
-        match self {
-            Light::Point { .. } => 1.0,
-            Light::Rect { ex, ey, .. } => 1.0 / ex.cross(*ey).length(),
-            Light::Mesh { area, .. } => 1.0 / area,
-            Light::Sphere { radius, .. } => 1.0 / (4.0 * PI * radius * radius),
-            Light::Directional { .. } | Light::Hemisphere { .. } | Light::Environment(_) => world.disk_pdf(),
-        }
+        self.kind().emission_pdf_pos(world)
     }
 
     /// Solid-angle density of `sample_emission` sending `dir` from a point
     /// whose emitting normal is `n` (lights at finite distance).
     pub fn emission_pdf_dir(&self, n: Vec3, dir: Vec3) -> f32 {
-        match self {
-            Light::Point { .. } => 1.0 / (4.0 * PI),
-            Light::Rect { .. } | Light::Mesh { .. } | Light::Sphere { .. } => n.dot(dir).max(0.0) / PI,
-            _ => 0.0,
-        }
+        self.kind().emission_pdf_dir(n, dir)
     }
 
     /// The area density (at `q`, normal `n`, on primitive `prim`) with
     /// which a light sample from `p` (`Light::sample`: by solid angle where
     /// it can) picks `q`; for a point light its position density, 1.
     pub fn sample_pdf_area(&self, scene: &Scene, p: Vec3, q: Vec3, n: Vec3, prim: u32) -> f32 {
-        let d = q - p;
-        let d2 = d.length_squared();
-        if !(d2 > 0.0) {
-            return 0.0;
-        }
-        let to_area = |pdf_w: f32| pdf_w * n.dot(d).abs() / (d2 * d2.sqrt());
-        match self {
-            Light::Point { .. } => 1.0,
-            Light::Rect { ex, ey, solid_angle, .. } => match solid_angle.and_then(|r| r.from(p)) {
-                Some(sr) => to_area(1.0 / sr.omega),
-                None => 1.0 / ex.cross(*ey).length(),
-            },
-            Light::Mesh { .. } | Light::Sphere { .. } => to_area(self.pdf_hit(scene, p, q, n, prim)),
-            _ => 0.0,
-        }
+        self.kind().sample_pdf_area(scene, p, q, n, prim)
     }
 
     /// The unit normal of this light's emitting side at `q`, a point a light
     /// sample (`Light::sample`, on primitive `prim`) chose; zero for a point light.
     pub fn normal_at(&self, scene: &Scene, q: Vec3, prim: u32) -> Vec3 {
-        match self {
-            Light::Rect { normal, .. } => *normal,
-            Light::Mesh { geom_id, .. } => match &scene.shapes[*geom_id as usize] {
-                Shape::Mesh(m) => {
-                    let [a, b, c] = m.triangles[prim as usize].map(|k| m.positions[k as usize]);
-                    crate::geometry::face_normal(a, b, c)
-                }
-                Shape::Sphere { .. } => Vec3::ZERO,
-            },
-            Light::Sphere { center, .. } => (q - *center).normalize_or_zero(),
-            _ => Vec3::ZERO,
-        }
+        self.kind().normal_at(scene, q, prim)
     }
 
     /// A ray leaving this light: `u_sel` picks a mesh's triangle, `u_pos`
@@ -198,46 +134,18 @@ impl Light {
     /// light at infinity's ray starts on the `World` disk facing the drawn
     /// direction, `n` zero.
     pub fn sample_emission(&self, scene: &Scene, world: &World, u_sel: f32, u_pos: (f32, f32), u_dir: (f32, f32)) -> Option<Emission> {
-        if self.is_at_infinity() {
-            let ls = self.sample(scene, world.center, u_dir, u_sel, EnvAt::Map)?;
-            let to_light = ls.wi;
-            if !(ls.pdf > 0.0) || ls.value == Vec3::ZERO {
-                return None;
-            }
-            let (dx, dy) = concentric_disk(u_pos);
-            let f = Frame::new(to_light);
-            let p = world.center + world.radius * (to_light + f.to_world(Vec3::new(dx, dy, 0.0)));
-            return Some(Emission { p, n: Vec3::ZERO, dir: -to_light, le: ls.value, pdf_pos: world.disk_pdf(), pdf_dir: ls.pdf, magnitude: p.abs().max_element(), prim: 0 });
+        if !self.is_at_infinity() {
+            return self.kind().emit(scene, world, u_sel, u_pos, u_dir);
         }
-        let (p, n, le, magnitude, prim) = match self {
-            Light::Point { position, intensity } => {
-                let dir = uniform_sphere(u_dir.0, u_dir.1);
-                return Some(Emission { p: *position, n: Vec3::ZERO, dir, le: *intensity, pdf_pos: 1.0, pdf_dir: 1.0 / (4.0 * PI), magnitude: position.abs().max_element(), prim: 0 });
-            }
-            Light::Rect { corner, ex, ey, normal, radiance, .. } => {
-                let p = *corner + *ex * u_pos.0 + *ey * u_pos.1;
-                (p, *normal, *radiance, magnitude(&[*corner, *corner + *ex + *ey, *corner + *ex, *corner + *ey]), 0)
-            }
-            Light::Mesh { geom_id, cdf, area, radiance, .. } => {
-                let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { return None };
-                let i = cdf.partition_point(|&c| c <= u_sel * area).min(cdf.len() - 1);
-                let [a, b, c] = m.triangles[i].map(|k| m.positions[k as usize]);
-                let (bu, bv) = uniform_triangle(u_pos.0, u_pos.1);
-                (crate::geometry::triangle::point_at(a, b, c, bu, bv), crate::geometry::face_normal(a, b, c), *radiance, magnitude(&[a, b, c]), i as u32)
-            }
-            Light::Sphere { center, radius, radiance, .. } => {
-                let n = uniform_sphere(u_pos.0, u_pos.1);
-                (*center + n * *radius, n, *radiance, center.abs().max_element() + radius, 0)
-            }
-            _ => return None,
-        };
-        if n == Vec3::ZERO {
+        let ls = self.sample(scene, world.center, u_dir, u_sel, EnvAt::Map)?;
+        let to_light = ls.wi;
+        if !(ls.pdf > 0.0) || ls.value == Vec3::ZERO {
             return None;
         }
-        let local = cosine_hemisphere(u_dir.0, u_dir.1);
-        let dir = Frame::new(n).to_world(local);
-        let pdf_dir = local.z / PI;
-        (pdf_dir > 0.0).then_some(Emission { p, n, dir, le, pdf_pos: self.emission_pdf_pos(world), pdf_dir, magnitude, prim })
+        let (dx, dy) = concentric_disk(u_pos);
+        let f = Frame::new(to_light);
+        let p = world.center + world.radius * (to_light + f.to_world(Vec3::new(dx, dy, 0.0)));
+        Some(Emission { p, n: Vec3::ZERO, dir: -to_light, le: ls.value, pdf_pos: world.disk_pdf(), pdf_dir: ls.pdf, magnitude: p.abs().max_element(), prim: 0 })
     }
 }
 
@@ -304,7 +212,7 @@ mod tests {
     fn emission_densities_match_the_draws() {
         // A unit-square rectangle facing +z: every draw lies on it, faces
         // its side, and reports the densities `emission_pdf_*` give.
-        let l = Light::Rect { corner: Vec3::ZERO, ex: Vec3::X * 2.0, ey: Vec3::Y, normal: Vec3::Z, radiance: Vec3::ONE, solid_angle: None };
+        let l = Light::Rect(super::super::RectLight { corner: Vec3::ZERO, ex: Vec3::X * 2.0, ey: Vec3::Y, normal: Vec3::Z, radiance: Vec3::ONE, solid_angle: None });
         let scene = crate::scene::builtin::load().unwrap();
         for i in 0..64 {
             let u = |k: u32| ((i * 7 + k * 13) % 64) as f32 / 64.0 + 1.0 / 128.0;
@@ -320,9 +228,9 @@ mod tests {
     #[test]
     fn lights_are_picked_by_power() {
         let lights = vec![
-            Light::Point { position: Vec3::ZERO, intensity: Vec3::ONE },
-            Light::Directional { to_light: Vec3::Y, irradiance: Vec3::ONE },
-            Light::Sphere { center: Vec3::ZERO, radius: 1.0, radiance: Vec3::ONE, cone: true },
+            Light::Point(super::super::PointLight { position: Vec3::ZERO, intensity: Vec3::ONE }),
+            Light::Directional(super::super::DirectionalLight { to_light: Vec3::Y, irradiance: Vec3::ONE }),
+            Light::Sphere(super::super::SphereLight { center: Vec3::ZERO, radius: 1.0, radiance: Vec3::ONE, cone: true }),
         ];
         let world = World { center: Vec3::ZERO, radius: 2.0 };
         let p = LightPower::new(&lights, world);
@@ -333,7 +241,7 @@ mod tests {
         assert!((p.pmf(0) - a / total).abs() < 1e-6 && (p.pmf(1) - d / total).abs() < 1e-6 && (p.pmf(2) - b / total).abs() < 1e-6);
         assert_eq!(p.pick(0.0).unwrap().0, 0);
         assert_eq!(p.pick(0.99).unwrap().0, 2);
-        let dark = [Light::Point { position: Vec3::ZERO, intensity: Vec3::ZERO }];
+        let dark = [Light::Point(super::super::PointLight { position: Vec3::ZERO, intensity: Vec3::ZERO })];
         assert!(LightPower::new(&dark, world).pick(0.5).is_none());
     }
 }

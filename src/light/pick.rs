@@ -28,10 +28,8 @@
 //! light.
 
 use super::Light;
-use crate::render::illuminance;
-use crate::scene::{Scene, Shape};
+use crate::color::illuminance;
 use glam::Vec3;
-use std::f32::consts::PI;
 
 /// Up to this many lights are picked from (a probability table on the stack).
 pub const MAX_LIGHTS: usize = 8;
@@ -41,51 +39,35 @@ pub const MAX_LIGHTS: usize = 8;
 /// half above the horizon).
 pub const DEFENSIVE: f32 = 0.1;
 
-/// Whether `light` has an estimate at all.
+/// Whether `light` has an estimate at all (`Emitter::pick_estimate`; the
+/// lights at infinity with a map or a sky have none).
 pub fn can_pick(light: &Light) -> bool {
-    !matches!(light, Light::Hemisphere { .. } | Light::Environment(_))
+    light.kind().pick_estimate(Vec3::ZERO, Vec3::Z).is_some()
 }
 
-/// An emissive mesh as the pick sees it: its area at its centroid, facing
-/// its mean normal where its normals agree.
-#[derive(Clone, Copy, Debug)]
-struct MeshProxy {
-    center: Vec3,
-    normal: Option<Vec3>,
-    area: f32,
+/// Luminance × area × the emitter's and the receiver's cosines / r²: the
+/// estimate of a patch of emitting surface at `c` (facing `normal`, or
+/// any way) seen from `p` with normal `n`.
+pub(super) fn patch(p: Vec3, n: Vec3, c: Vec3, area: f32, normal: Option<Vec3>, radiance: Vec3) -> f32 {
+    let d = c - p;
+    let r2 = d.length_squared();
+    if !(r2 > 0.0) {
+        return 0.0;
+    }
+    let w = d / r2.sqrt();
+    let cos_l = normal.map_or(0.5, |nl| (-nl.dot(w)).max(0.0));
+    illuminance(radiance) * area * cos_l * n.dot(w).max(0.0) / r2
 }
 
-/// What the pick needs beyond the lights: each emissive mesh's proxy.
+/// The pick: which lights a light sample chooses from, and how.
 #[derive(Clone, Debug)]
-pub struct Picker {
-    meshes: Vec<Option<MeshProxy>>,
-}
+pub struct Picker;
 
 impl Picker {
-    /// For `lights` of `scene`, when they can be picked from: 2 to
-    /// `MAX_LIGHTS` of them, all with an estimate.
-    pub fn new(scene: &Scene, lights: &[Light]) -> Option<Picker> {
-        if !(2..=MAX_LIGHTS).contains(&lights.len()) || !lights.iter().all(can_pick) {
-            return None;
-        }
-        let meshes = lights
-            .iter()
-            .map(|l| {
-                let Light::Mesh { geom_id, .. } = l else { return None };
-                let Shape::Mesh(m) = &scene.shapes[*geom_id as usize] else { return None };
-                let (mut area, mut center, mut nsum) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
-                for t in &m.triangles {
-                    let [a, b, c] = t.map(|i| m.positions[i as usize]);
-                    let cross = (b - a).cross(c - a);
-                    let ai = 0.5 * cross.length();
-                    area += ai;
-                    center += ai * (a + b + c) / 3.0;
-                    nsum += 0.5 * cross;
-                }
-                (area > 0.0).then(|| MeshProxy { center: center / area, normal: (nsum.length() > 0.9 * area).then(|| nsum.normalize()), area })
-            })
-            .collect();
-        Some(Picker { meshes })
+    /// For `lights`, when they can be picked from: 2 to `MAX_LIGHTS` of
+    /// them, all with an estimate.
+    pub fn new(lights: &[Light]) -> Option<Picker> {
+        ((2..=MAX_LIGHTS).contains(&lights.len()) && lights.iter().all(can_pick)).then_some(Picker)
     }
 
     /// The pick probabilities of `lights` (those `new` was given) at `p`
@@ -95,8 +77,8 @@ impl Picker {
         let mut prob = [0.0f32; MAX_LIGHTS];
         let k = lights.len();
         let mut sum = 0.0;
-        for (i, (e, l)) in prob.iter_mut().zip(lights).enumerate() {
-            *e = self.estimate(i, l, p, n);
+        for (e, l) in prob.iter_mut().zip(lights) {
+            *e = estimate(l, p, n);
             sum += *e;
         }
         let uniform = 1.0 / k as f32;
@@ -105,31 +87,12 @@ impl Picker {
         }
         prob
     }
+}
 
-    /// Light `i`'s unshadowed irradiance estimate at `p` with normal `n`.
-    fn estimate(&self, i: usize, light: &Light, p: Vec3, n: Vec3) -> f32 {
-        let toward = |c: Vec3| {
-            let d = c - p;
-            let r2 = d.length_squared();
-            (r2 > 0.0).then(|| (d / r2.sqrt(), r2))
-        };
-        // Luminance × area × the emitter's and the receiver's cosines / r².
-        let patch = |c: Vec3, area: f32, normal: Option<Vec3>, radiance: Vec3| {
-            toward(c).map_or(0.0, |(w, r2)| {
-                let cos_l = normal.map_or(0.5, |nl| (-nl.dot(w)).max(0.0));
-                illuminance(radiance) * area * cos_l * n.dot(w).max(0.0) / r2
-            })
-        };
-        let e = match light {
-            Light::Point { position, intensity } => toward(*position).map_or(0.0, |(w, r2)| illuminance(*intensity) * n.dot(w).max(0.0) / r2),
-            Light::Directional { to_light, irradiance } => illuminance(*irradiance) * n.dot(*to_light).max(0.0),
-            Light::Rect { corner, ex, ey, normal, radiance, .. } => patch(*corner + 0.5 * (*ex + *ey), ex.cross(*ey).length(), Some(*normal), *radiance),
-            Light::Mesh { radiance, .. } => self.meshes[i].map_or(0.0, |m| patch(m.center, m.area, m.normal, *radiance)),
-            Light::Sphere { center, radius, radiance, .. } => toward(*center).map_or(0.0, |(w, r2)| illuminance(*radiance) * PI * radius * radius * n.dot(w).max(0.0) / r2),
-            Light::Hemisphere { .. } | Light::Environment(_) => 0.0,
-        };
-        if e.is_finite() { e.max(0.0) } else { 0.0 }
-    }
+/// A light's unshadowed irradiance estimate at `p` with normal `n`.
+fn estimate(light: &Light, p: Vec3, n: Vec3) -> f32 {
+    let e = light.kind().pick_estimate(p, n).unwrap_or(0.0);
+    if e.is_finite() { e.max(0.0) } else { 0.0 }
 }
 
 /// The light `u` ∈ [0, 1) picks from `prob` (the first `k` entries).
@@ -150,16 +113,16 @@ mod tests {
     use crate::light::spherical_rect::RectEmitter;
 
     fn probabilities(lights: &[Light], p: Vec3, n: Vec3) -> [f32; MAX_LIGHTS] {
-        Picker { meshes: vec![None; lights.len()] }.probabilities(lights, p, n)
+        Picker.probabilities(lights, p, n)
     }
 
     fn lights() -> Vec<Light> {
         let corner = Vec3::new(-0.3, 2.0, -0.4);
         let (ex, ey) = (Vec3::new(0.6, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.8));
         vec![
-            Light::Point { position: Vec3::new(0.5, 1.0, 0.0), intensity: Vec3::splat(2.0) },
-            Light::Rect { corner, ex, ey, normal: Vec3::NEG_Y, radiance: Vec3::splat(10.0), solid_angle: RectEmitter::new(corner, ex, ey, Vec3::NEG_Y) },
-            Light::Sphere { center: Vec3::new(-1.0, 0.5, 0.0), radius: 0.1, radiance: Vec3::splat(5.0), cone: true },
+            Light::Point(crate::light::PointLight { position: Vec3::new(0.5, 1.0, 0.0), intensity: Vec3::splat(2.0) }),
+            Light::Rect(crate::light::RectLight { corner, ex, ey, normal: Vec3::NEG_Y, radiance: Vec3::splat(10.0), solid_angle: RectEmitter::new(corner, ex, ey, Vec3::NEG_Y) }),
+            Light::Sphere(crate::light::SphereLight { center: Vec3::new(-1.0, 0.5, 0.0), radius: 0.1, radiance: Vec3::splat(5.0), cone: true }),
         ]
     }
 

@@ -4,6 +4,8 @@
 
 pub mod aov;
 pub mod bdpt;
+pub mod integrator;
+pub mod job;
 pub mod normals;
 pub mod path;
 pub mod splat;
@@ -19,7 +21,6 @@ use sums::PixelSums;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
-use std::io::IsTerminal;
 use std::time::Instant;
 
 /// Side of the square tiles the frame is rendered in (and split by, with
@@ -181,16 +182,7 @@ pub struct RenderOutput {
     pub seconds: f64,
 }
 
-/// Whether to draw a progress bar: only on a terminal, never under CI.
-pub fn progress_wanted() -> bool {
-    std::io::stderr().is_terminal() && std::env::var_os("CI").is_none()
-}
-
-/// CS184 illuminance (Rec. 709 luminance).
-#[inline]
-pub fn illuminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
-}
+pub use crate::color::illuminance;
 
 /// One pixel's sampling state within a tile.
 struct PixelState {

@@ -5,7 +5,7 @@
 //!
 //! Every error names the file and what is wrong with it, in one line.
 
-use super::{material::Bsdf, CameraDesc, LightDesc, LightKind, Material, Object, Scene, Shape, TriangleMesh};
+use super::{material::Surface, CameraDesc, LightDesc, LightKind, Material, Object, Scene, Shape, TriangleMesh};
 use crate::error::{Error, Result};
 use glam::{Mat4, Vec3, Vec4};
 use roxmltree::{Document, Node};
@@ -398,27 +398,27 @@ impl<'a, 'i> Loader<'a, 'i> {
             .and_then(|e| e.attribute("url"))
             .ok_or_else(|| Error::new(format!("{what}: no <instance_effect>")))?;
         let effect = self.lookup(effect_url, "effect", &what)?;
-        let bsdf = if let Some(t) = cgl_technique(effect) {
+        let surface = if let Some(t) = cgl_technique(effect) {
             let kind = first_element(t).ok_or_else(|| Error::new(format!("{what}: empty CGL technique")))?;
             let w = format!("{what} <{}>", kind.tag_name().name());
             let scalar = |tag: &str| -> Result<f32> {
                 float_of(kind, tag, &w)?.ok_or_else(|| Error::new(format!("{w}: missing <{tag}>")))
             };
             match kind.tag_name().name() {
-                "emission" => Bsdf::Emission { radiance: rgb_of(kind, "radiance", &w)? },
-                "mirror" => Bsdf::Mirror { reflectance: rgb_of(kind, "reflectance", &w)? },
-                "glass" => Bsdf::Glass {
+                "emission" => Surface::Emission { radiance: rgb_of(kind, "radiance", &w)? },
+                "mirror" => Surface::Mirror { reflectance: rgb_of(kind, "reflectance", &w)? },
+                "glass" => Surface::Glass {
                     reflectance: rgb_of(kind, "reflectance", &w)?,
                     transmittance: rgb_of(kind, "transmittance", &w)?,
                     roughness: scalar("roughness")?,
                     ior: scalar("ior")?,
                 },
-                "refraction" => Bsdf::Refraction {
+                "refraction" => Surface::Refraction {
                     transmittance: rgb_of(kind, "transmittance", &w)?,
                     roughness: scalar("roughness")?,
                     ior: scalar("ior")?,
                 },
-                "microfacet" => Bsdf::Microfacet { alpha: scalar("alpha")?, eta: rgb_of(kind, "eta", &w)?, k: rgb_of(kind, "k", &w)? },
+                "microfacet" => Surface::Microfacet { alpha: scalar("alpha")?, eta: rgb_of(kind, "eta", &w)?, k: rgb_of(kind, "k", &w)? },
                 other => crate::bail!("{what}: unknown CGL material element <{other}>"),
             }
         } else {
@@ -426,20 +426,20 @@ impl<'a, 'i> Loader<'a, 'i> {
                 .and_then(|p| child(p, "technique"))
                 .and_then(|t| ["phong", "lambert", "blinn"].iter().find_map(|s| child(t, s)));
             match shader.and_then(|s| child(s, "diffuse")).and_then(|d| child(d, "color")) {
-                Some(c) => Bsdf::Diffuse { albedo: rgb(c, &format!("{what} diffuse colour"))? },
-                None => Material::default_diffuse().bsdf,
+                Some(c) => Surface::Diffuse { albedo: rgb(c, &format!("{what} diffuse colour"))? },
+                None => Material::default_diffuse().surface,
             }
         };
-        if let Bsdf::Diffuse { albedo } = bsdf {
+        if let Surface::Diffuse { albedo } = surface {
             if albedo.min_element() < 0.0 || albedo.max_element() > 1.0 {
                 crate::bail!("{what}: diffuse albedo {albedo} is outside [0, 1]");
             }
         }
-        let emission = if let Bsdf::Emission { radiance } = bsdf { radiance } else { Vec3::ZERO };
+        let emission = if let Surface::Emission { radiance } = surface { radiance } else { Vec3::ZERO };
         if !(emission.min_element() >= 0.0) {
             crate::bail!("{what}: negative emission {emission}");
         }
-        Ok(Material { name: id.to_string(), bsdf, emission })
+        Ok(Material { name: id.to_string(), surface, emission })
     }
 
     fn light(&self, inst: Node, xf: Mat4, node_name: &str) -> Result<LightDesc> {

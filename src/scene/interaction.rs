@@ -2,7 +2,7 @@
 //! `Hit` by code shared by all backends.
 
 use super::{Scene, Shape};
-use crate::accel::Hit;
+use crate::ray::Hit;
 use crate::geometry::{intersect_triangle, RayTransform};
 use crate::sampling::{magnitude, offset_ray_origin, ulp};
 use crate::ray::Ray;

@@ -3,6 +3,7 @@
 
 pub mod builtin;
 pub mod collada;
+pub mod generated;
 pub mod interaction;
 pub mod material;
 pub mod mesh_scene;
@@ -10,7 +11,7 @@ pub mod obj;
 pub mod ply;
 
 pub use interaction::Interaction;
-pub use material::{Bsdf, Material};
+pub use material::{Material, Surface};
 
 use crate::geometry::Aabb;
 use glam::{Mat4, Vec3};

@@ -5,7 +5,7 @@ use pathtracer::accel::{self, BackendKind, Traversal};
 use glam::{Mat3, Vec3};
 use pathtracer::camera::Camera;
 use pathtracer::render::path::specular_guide::{self, SpecularGuide};
-use pathtracer::scene::{collada, Bsdf, CameraDesc, LightDesc, Material, Object, Scene, Shape, TriangleMesh};
+use pathtracer::scene::{collada, Surface, CameraDesc, LightDesc, Material, Object, Scene, Shape, TriangleMesh};
 use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
 use std::path::{Path, PathBuf};
 
@@ -130,13 +130,13 @@ pub fn chi2_p(counts: &[f64], expected: &[f64]) -> f64 {
 
 
 pub fn diffuse(name: &str, albedo: f32, emission: f32) -> Material {
-    Material { name: name.into(), bsdf: Bsdf::Diffuse { albedo: Vec3::splat(albedo) }, emission: Vec3::splat(emission) }
+    Material { name: name.into(), surface: Surface::Diffuse { albedo: Vec3::splat(albedo) }, emission: Vec3::splat(emission) }
 }
 
 /// Smooth glass of index 1.45 that reflects and transmits everything
 /// (CS184's `<glass>` with reflectance and transmittance 1).
 pub fn lossless_glass() -> Material {
-    Material { name: "glass".into(), bsdf: Bsdf::Glass { reflectance: Vec3::ONE, transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 }, emission: Vec3::ZERO }
+    Material { name: "glass".into(), surface: Surface::Glass { reflectance: Vec3::ONE, transmittance: Vec3::ONE, roughness: 0.0, ior: 1.45 }, emission: Vec3::ZERO }
 }
 
 /// A welded cube [-h,h]^3 (shared vertices), every triangle wound to face

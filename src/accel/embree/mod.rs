@@ -217,7 +217,11 @@ mod absent {
     pub struct EmbreeBackend(());
 
     impl EmbreeBackend {
-        pub fn build(major: Major, _shapes: &[Shape], _threads: usize, _quality: Quality) -> Result<Self> {
+        pub fn build(major: Major, shapes: &[Shape], threads: usize, quality: Quality) -> Result<Self> {
+            Self::build_configured(major, shapes, threads, quality, "")
+        }
+
+        pub fn build_configured(major: Major, _shapes: &[Shape], _threads: usize, _quality: Quality, _extra: &str) -> Result<Self> {
             let lib = library(major).map_err(crate::Error::new)?;
             let _ = lib;
             unreachable!("no Embree library loads in a build without the shim")
@@ -334,17 +338,20 @@ mod present {
         /// Build `major`'s scene over `shapes`; `threads` sizes Embree's TBB
         /// pool (0: all cores).
         pub fn build(major: Major, shapes: &[Shape], threads: usize, quality: Quality) -> Result<Self> {
+            Self::build_configured(major, shapes, threads, quality, "")
+        }
+
+        /// `build` with `extra` appended to the device's configuration
+        /// (for measurements, e.g. "verbose=2" prints Embree's BVH
+        /// statistics, its SAH cost, after each build).
+        pub fn build_configured(major: Major, shapes: &[Shape], threads: usize, quality: Quality, extra: &str) -> Result<Self> {
             let lib = library(major).map_err(crate::Error::new)?;
             let api = lib.api;
             let mut config = if threads > 0 { format!("threads={threads}") } else { String::new() };
-            // Extra device settings for measurements, e.g. "verbose=2" prints
-            // Embree's BVH statistics (its SAH cost) after each build.
-            if let Ok(extra) = std::env::var("PATHTRACER_EMBREE_CONFIG") {
-                if !config.is_empty() && !extra.is_empty() {
-                    config.push(',');
-                }
-                config.push_str(&extra);
+            if !config.is_empty() && !extra.is_empty() {
+                config.push(',');
             }
+            config.push_str(extra);
             let c = CString::new(config).unwrap();
             let device = unsafe { (api.device_new.unwrap())(c.as_ptr()) };
             if device.is_null() {

@@ -7,7 +7,7 @@ use super::single::ORDER_MIN_BATCH;
 use super::tests::{rays, shapes, tight_packets};
 use super::*;
 use crate::accel::brute::BruteForce;
-use crate::bench::camera_rays;
+use crate::accel::workloads::camera_rays;
 use crate::camera::Camera;
 
 /// The exact `cold_lines`: every node and leaf's probability and lines.
@@ -38,13 +38,13 @@ fn exact_cold_lines(b: &WideBvh<8>, hot: usize) -> f64 {
 #[test]
 fn cold_lines_estimate_matches_the_exact_sum() {
     for (spec, hot) in [("sphere:100k", 512), ("stadium:100k", 64), ("arch:100k", 256), ("grass:50k", 1024)] {
-        let scene = crate::bench::scenes::generate(spec).unwrap().unwrap();
+        let scene = crate::scene::generated::for_tests(spec);
         let b = WideBvh::<8>::build(&scene.shapes);
         let ((est, se), exact) = (b.cold_lines(hot), exact_cold_lines(&b, hot));
         assert!(exact > 0.0, "{spec}: a test needs cold items");
         assert!((est - exact).abs() <= 4.0 * se + 1e-9 * exact, "{spec}, hot {hot}: estimate {est} ± {se}, exact {exact}");
     }
-    let cold = |spec: &str| WideBvh::<8>::build(&crate::bench::scenes::generate(spec).unwrap().unwrap().shapes).cold_lines(HOT_ITEMS).0;
+    let cold = |spec: &str| WideBvh::<8>::build(&crate::scene::generated::for_tests(spec).shapes).cold_lines(HOT_ITEMS).0;
     assert!(cold("sphere:300k") >= COLD_LINES);
     for spec in ["arch:300k", "stadium:300k"] {
         assert!(cold(spec) < COLD_LINES, "{spec}");
@@ -90,10 +90,10 @@ fn both_any_hit_orders_answer_alike_and_the_choice_follows_the_work() {
         }
     }
     for (spec, expect) in [("grass:500k", ChildOrder::NearestFirst), ("arch:100k", ChildOrder::FarthestFirst)] {
-        let scene = crate::bench::load_bench_scene(spec).unwrap();
+        let scene = crate::scene::generated::for_tests(spec);
         let bvh = WideBvh::<8>::build(&scene.shapes);
         let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
-        let shadow = crate::bench::shadow_rays(&scene, &bvh, &cam);
+        let shadow = crate::accel::workloads::shadow_rays(&scene, &bvh, &cam);
         assert!(shadow.len() >= ORDER_MIN_BATCH, "{spec}: too few shadow rays");
         assert_eq!(bvh.any_order::<false>(&shadow), expect, "{spec}");
     }

@@ -235,7 +235,8 @@ mod tests {
     use super::*;
     use crate::accel::brute::BruteForce;
     use crate::accel::Traversal;
-    use crate::bench::{camera_rays, diffuse_rays, load_bench_scene, tile_order};
+    use crate::accel::workloads::{camera_rays, diffuse_rays, tile_order};
+    use crate::scene::generated::for_tests as load_bench_scene;
     use crate::camera::Camera;
 
     /// `closest_streams` as its callers run it (compiled with AVX2).
@@ -278,11 +279,11 @@ mod tests {
             return;
         }
         for spec in ["subdiv:CBbunny:100k", "grass:30k", "arch:50k"] {
-            let scene = load_bench_scene(spec).unwrap();
+            let scene = load_bench_scene(spec);
             let bvh = WideBvh::<8>::build(&scene.shapes);
             let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
             let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
-            let random = crate::bench::random_rays(&scene, 4096, 2);
+            let random = crate::accel::workloads::random_rays(&scene, 4096, 2);
             for (what, rays) in [("diffuse", &diffuse), ("random", &random)] {
                 let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
                 let mut via_streams = vec![None; rays.len()];

@@ -264,7 +264,8 @@ mod tests {
     use super::*;
     use crate::accel::brute::BruteForce;
     use crate::accel::Traversal;
-    use crate::bench::{camera_rays, load_bench_scene, shadow_rays};
+    use crate::accel::workloads::{camera_rays, shadow_rays};
+    use crate::scene::generated::for_tests as load_bench_scene;
     use crate::camera::Camera;
 
     /// `any_streams` compiled with AVX2, as its callers are.
@@ -311,7 +312,7 @@ mod tests {
             return;
         }
         for spec in ["subdiv:CBbunny:100k", "grass:30k"] {
-            let scene = load_bench_scene(spec).unwrap();
+            let scene = load_bench_scene(spec);
             let bvh = WideBvh::<8>::build(&scene.shapes);
             let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
             let mut rays = shadow_rays(&scene, &bvh, &cam);

@@ -5,7 +5,8 @@ use super::triangle::intersect_group_scalar;
 use super::*;
 use glam::Vec3;
 use crate::accel::brute::BruteForce;
-use crate::bench::{camera_rays, procedural_scene, random_rays};
+use crate::accel::workloads::{camera_rays, random_rays};
+use crate::scene::generated::{for_tests as load_bench_scene, sphere_scene as procedural_scene};
 use crate::camera::Camera;
 use crate::rng::Rng;
 use crate::scene::TriangleMesh;
@@ -514,7 +515,7 @@ fn packets_that_give_up_answer_as_single_rays() {
     use std::sync::atomic::Ordering;
     let before = frustum::BAILOUTS.load(Ordering::Relaxed);
     for spec in ["arch:300k", "subdiv:CBbunny:200k"] {
-        let scene = crate::bench::load_bench_scene(spec).unwrap();
+        let scene = load_bench_scene(spec);
         let bvh = WideBvh::<8>::build(&scene.shapes);
         let cam = camera_rays(&crate::camera::Camera::from_scene(&scene), 512, 384);
         let mut packed = vec![None; cam.len()];
@@ -524,7 +525,7 @@ fn packets_that_give_up_answer_as_single_rays() {
         for (r, h) in cam.iter().zip(&packed) {
             assert_eq!(*h, bvh.intersect(r), "{spec}: camera ray {r:?}");
         }
-        let shadow = crate::bench::shadow_rays(&scene, &bvh, &cam);
+        let shadow = crate::accel::workloads::shadow_rays(&scene, &bvh, &cam);
         let mut occ = vec![false; shadow.len()];
         for (r, o) in shadow.chunks(4096).zip(occ.chunks_mut(4096)) {
             bvh.occluded_coherent(r, o);
@@ -566,10 +567,10 @@ fn masked_shadow_packets_match_brute_force() {
         let bad = rays.iter().zip(&got).filter(|(r, o)| brute.occluded(r) != **o).count();
         assert_eq!(bad, 0, "masked packets: occlusion mismatches against brute force");
         assert!(got.iter().any(|o| *o) && got.iter().any(|o| !*o), "the rays must be partly occluded for the test to mean anything");
-        let scene = crate::bench::load_bench_scene("arch:100k").unwrap();
+        let scene = load_bench_scene("arch:100k");
         let bvh = WideBvh::<8>::build(&scene.shapes);
         let cam = camera_rays(&crate::camera::Camera::from_scene(&scene), 256, 192);
-        let shadow = crate::bench::shadow_rays(&scene, &bvh, &cam);
+        let shadow = crate::accel::workloads::shadow_rays(&scene, &bvh, &cam);
         // SAFETY: as above.
         let got = unsafe { masked(&bvh, &shadow, order) };
         for (r, o) in shadow.iter().zip(&got) {

@@ -261,7 +261,7 @@ impl Integrator for Bdpt<'_> {
 fn has_delta_objects(scene: &Scene) -> bool {
     (0..scene.shapes.len()).any(|g| {
         let m = scene.material_of(g as u32);
-        m.emission == Vec3::ZERO && crate::bsdf::Bsdf::of(&m.bsdf, true).is_some_and(|b| b.is_delta())
+        m.emission == Vec3::ZERO && crate::bsdf::Bsdf::of(&m.surface, true).is_some_and(|b| b.is_delta())
     })
 }
 

@@ -105,7 +105,7 @@ impl Vertex {
         if ns.dot(ng) <= 0.0 {
             ns = ng;
         }
-        let bsdf = Bsdf::of(&scene.material_of(it.geom_id).bsdf, front);
+        let bsdf = Bsdf::of(&scene.material_of(it.geom_id).surface, front);
         Vertex { kind: Kind::Surface, it, frame: Frame::new(ns), wo, bsdf, beta, pdf_fwd: 0.0, pdf_rev: 0.0, delta: false }
     }
 

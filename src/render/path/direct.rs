@@ -125,9 +125,9 @@ impl<'a> PathTracer<'a> {
         let u_sel = if light.uses_selection() { sampler.slot_1d(dim::LIGHT_CHOICE, k) } else { 0.0 };
         // The sky at a diffuse vertex: the lune sampler alone (its
         // weight is constant; BSDF rays escaping there add nothing).
-        let lune = at.alone && matches!(light, Light::Hemisphere { lune: true, .. });
+        let lune = at.alone && matches!(light, Light::Hemisphere(crate::light::HemisphereLight { lune: true, .. }));
         let s = match light {
-            Light::Hemisphere { radiance, .. } if lune => {
+            Light::Hemisphere(crate::light::HemisphereLight { radiance, .. }) if lune => {
                 lune::sample(v.ns, u).map(|(wi, pdf)| LightSample { wi, value: *radiance, pdf, target: Target::Infinite, covers: true, prim: 0 })
             }
             _ => light.sample(self.scene, v.it.p, u, u_sel, at.env_at),

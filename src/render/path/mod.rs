@@ -40,8 +40,8 @@ mod wavefront;
 use super::Integrator;
 use crate::accel::{Hit, Traversal};
 use crate::bsdf::Bsdf;
-use specular_guide::{GuideAt, SpecularGuide};
-use crate::light::{emitted, EnvAt, Lights};
+use specular_guide::SpecularGuide;
+use crate::light::{EnvAt, Lights};
 use crate::ray::Ray;
 use crate::sampler::Sampler;
 use crate::sampling::Frame;
@@ -83,17 +83,6 @@ pub(super) struct Vertex {
 }
 
 impl PathTracer<'_> {
-    fn trace(&self, accel: &dyn Traversal, ray: &Ray, rays: &mut u64) -> Option<Interaction> {
-        *rays += 1;
-        accel.intersect(ray).map(|h| Interaction::with_barycentrics(self.scene, ray, &h, accel.exact_barycentrics()))
-    }
-
-    pub(super) fn vertex(&self, it: Interaction, wo: Vec3) -> Vertex {
-        let mut slot = None;
-        self.vertex_in(it, wo, &mut slot);
-        slot.expect("vertex_in fills the slot")
-    }
-
     /// `vertex`, made in place in `slot`: returned by value into a path's
     /// `Option<Vertex>`, the 176-byte vertex was copied twice (two `memcpy`
     /// calls per bounce, 3 % of a CBgems render).
@@ -107,7 +96,7 @@ impl PathTracer<'_> {
             ns = ng; // an interpolated normal turned past the face: use the face's
         }
         let frame = Frame::new(ns);
-        let bsdf = Bsdf::of(&self.scene.material_of(it.geom_id).bsdf, front);
+        let bsdf = Bsdf::of(&self.scene.material_of(it.geom_id).surface, front);
         let v = slot.insert(Vertex { it, ng, ns, frame, wo: frame.to_local(wo), bsdf, env_at: EnvAt::Map });
         if let Some(b) = &v.bsdf {
             v.env_at = self.env_at(b, v);
@@ -181,7 +170,7 @@ impl PathTracer<'_> {
             .iter()
             .map(|l| {
                 let le = l.escaped(c.wi);
-                if c.alone && matches!(l, crate::light::Light::Hemisphere { lune: true, .. }) {
+                if c.alone && matches!(l, crate::light::Light::Hemisphere(crate::light::HemisphereLight { lune: true, .. })) {
                     Vec3::ZERO
                 } else if le == Vec3::ZERO || c.delta {
                     le
@@ -191,80 +180,19 @@ impl PathTracer<'_> {
             })
             .sum()
     }
-
-    /// Direct light reflected at `v` towards the previous vertex: the
-    /// wavefront's terms (`direct_terms`), their rays traced one by one.
-    /// Also whether the vertex's BSDF sample can still find light (see
-    /// `direct_terms`).
-    #[allow(clippy::too_many_arguments)]
-    fn direct(&self, accel: &dyn Traversal, v: &Vertex, bounce: u32, guide: Option<&GuideAt>, sampler: &mut Sampler, rays: &mut u64) -> (Vec3, bool) {
-        let (mut terms, mut shadow, mut closest) = (Vec::new(), Vec::new(), Vec::new());
-        let bsdf_finds_light = self.direct_terms(v, bounce, guide, sampler, &mut terms, &mut shadow, &mut closest);
-        *rays += (shadow.len() + closest.len()) as u64;
-        let occluded: Vec<bool> = shadow.iter().map(|r| accel.occluded(r)).collect();
-        let found: Vec<Option<Hit>> = closest.iter().map(|r| accel.intersect(r)).collect();
-        (self.replay(accel, &terms, &occluded, &closest, &found), bsdf_finds_light)
-    }
 }
 
 impl Integrator for PathTracer<'_> {
     fn radiance_batch(&self, accel: &dyn Traversal, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
-        self.wavefront(accel, rays, hits, samplers, out, ray_count)
+        self.wavefront(accel, rays, hits, samplers, out, ray_count, wavefront::Tracing::Batched)
     }
 
+    /// One path: the bounce loop (`wavefront`) over a batch of one, each
+    /// ray traced alone.
     fn radiance_from(&self, accel: &dyn Traversal, camera_ray: &Ray, hit: Option<Hit>, sampler: &mut Sampler, rays: &mut u64) -> Vec3 {
-        let m = self.max_depth;
-        let counts = |bounce: u32| self.accumulate || bounce == m;
-        let wo = -camera_ray.dir.normalize();
-        let Some(it) = hit.map(|h| Interaction::with_barycentrics(self.scene, camera_ray, &h, accel.exact_barycentrics())) else {
-            return if counts(0) { self.lights.escaped(-wo) } else { Vec3::ZERO };
-        };
-        let mut l = if counts(0) { emitted(self.scene, &it, wo) } else { Vec3::ZERO };
-        if m == 0 {
-            return l;
-        }
-        let mut v = self.vertex(it, wo);
-        let mut beta = Vec3::ONE;
-        let mut radiance_scale = 1.0;
-        let mut bounce = 1;
-        let mut guide_slot = None;
-        loop {
-            let count = counts(bounce);
-            sampler.set_bounce(bounce);
-            let mut seeks_light = false;
-            let guide = self.guide_at(&v, bounce, &mut guide_slot);
-            if count {
-                let (d, finds) = self.direct(accel, &v, bounce, guide, sampler, rays);
-                l += beta * d;
-                seeks_light = finds;
-            }
-            // With MIS the last vertex still needs its BSDF sample: the light
-            // it finds is part of this bounce's direct light.
-            let Some(c) = self.continuation(&v, bounce, guide, seeks_light, beta, radiance_scale, sampler) else { break };
-            let last = bounce == m;
-            let ray = v.it.spawn_ray(c.wi);
-            let gather = count && (!self.hemisphere || c.delta);
-            let Some(next) = self.trace(accel, &ray, rays) else {
-                if gather {
-                    l += c.beta * self.escaped_weighted(&c);
-                }
-                break;
-            };
-            if gather {
-                let le = emitted(self.scene, &next, -c.wi);
-                if le != Vec3::ZERO {
-                    l += c.beta * le * self.bsdf_weight_hit(&v, &next, &c);
-                }
-            }
-            if last {
-                break;
-            }
-            v = self.vertex(next, -c.wi);
-            beta = c.beta;
-            radiance_scale = c.radiance_scale;
-            bounce += 1;
-        }
-        l
+        let mut out = [Vec3::ZERO];
+        self.wavefront(accel, std::slice::from_ref(camera_ray), &[hit], &mut [sampler], &mut out, rays, wavefront::Tracing::OneByOne);
+        out[0]
     }
 }
 

@@ -61,13 +61,13 @@ pub const MIN_ALBEDO: f32 = 0.5;
 
 /// The brightest channel of what a material reflects or transmits
 /// non-diffusely (at normal incidence); 0 for diffuse and emitters.
-fn specular_albedo(b: &material::Bsdf) -> f32 {
+fn specular_albedo(b: &material::Surface) -> f32 {
     match *b {
-        material::Bsdf::Diffuse { .. } | material::Bsdf::Emission { .. } => 0.0,
-        material::Bsdf::Mirror { reflectance } => reflectance.max_element(),
-        material::Bsdf::Glass { reflectance, transmittance, .. } => reflectance.max(transmittance).max_element(),
-        material::Bsdf::Refraction { transmittance, .. } => transmittance.max_element(),
-        material::Bsdf::Microfacet { eta, k, .. } => crate::bsdf::fresnel::conductor(1.0, eta, k).max_element(),
+        material::Surface::Diffuse { .. } | material::Surface::Emission { .. } => 0.0,
+        material::Surface::Mirror { reflectance } => reflectance.max_element(),
+        material::Surface::Glass { reflectance, transmittance, .. } => reflectance.max(transmittance).max_element(),
+        material::Surface::Refraction { transmittance, .. } => transmittance.max_element(),
+        material::Surface::Microfacet { eta, k, .. } => crate::bsdf::fresnel::conductor(1.0, eta, k).max_element(),
     }
 }
 
@@ -96,7 +96,7 @@ impl SpecularGuide {
         let mut targets = Vec::new();
         for (g, shape) in scene.shapes.iter().enumerate() {
             let m = scene.material_of(g as u32);
-            if m.emission != Vec3::ZERO || specular_albedo(&m.bsdf) < MIN_ALBEDO {
+            if m.emission != Vec3::ZERO || specular_albedo(&m.surface) < MIN_ALBEDO {
                 continue;
             }
             let t = match shape {

@@ -1,15 +1,15 @@
-//! The path tracer over a batch of camera rays (one sample round of a tile),
-//! bounce by bounce: every path's direct-light samples and continuation ray
-//! are drawn first, then all shadow rays are traced as one batch and all
-//! other rays as another, then every path adds what its rays found.
+//! The path tracer's one bounce loop, over a batch of camera rays (one
+//! sample round of a tile): every path's direct-light samples and
+//! continuation ray are drawn first, then the bounce's rays are traced —
+//! all shadow rays as one batch and all other rays as another, or each
+//! alone (`Tracing`) — then every path adds what its rays found.
 //!
-//! `PathTracer::radiance_from` (one path at a time) is built from the same
-//! pieces (`direct_terms`, `replay`, `continuation`), tracing each ray as it
-//! is drawn. Each path draws from its own random stream in the same order
-//! either way (visibility never changes what is drawn next), and the
-//! deferred sums are replayed in the same order, so every path's radiance
-//! is bit-identical: batching changes which rays travel together, never the
-//! image.
+//! `PathTracer::radiance_from` (one path at a time) is this loop over a
+//! batch of one, its rays traced alone: the two cannot drift apart. Each
+//! path draws from its own random stream in the same order whatever else
+//! is in the batch (visibility never changes what is drawn next), so every
+//! path's radiance is bit-identical: batching changes which rays travel
+//! together, never the image.
 
 use super::direct::Term;
 use super::{Continuation, PathTracer, Vertex};
@@ -19,6 +19,39 @@ use crate::ray::Ray;
 use crate::sampler::Sampler;
 use crate::scene::Interaction;
 use glam::Vec3;
+
+/// How a bounce's rays are traced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Tracing {
+    /// Shadow rays as one coherent batch, the other rays as one batch.
+    Batched,
+    /// Each ray on its own.
+    OneByOne,
+}
+
+impl Tracing {
+    /// `occluded[i]` for `shadow[i]`, `found[i]` for `closest[i]`.
+    fn trace(self, accel: &dyn Traversal, shadow: &[Ray], closest: &[Ray], occluded: &mut Vec<bool>, found: &mut Vec<Option<Hit>>) {
+        occluded.clear();
+        occluded.resize(shadow.len(), false);
+        found.clear();
+        found.resize(closest.len(), None);
+        match self {
+            Tracing::Batched => {
+                accel.occluded_coherent(shadow, occluded);
+                accel.intersect_batch(closest, found);
+            }
+            Tracing::OneByOne => {
+                for (r, o) in shadow.iter().zip(occluded.iter_mut()) {
+                    *o = accel.occluded(r);
+                }
+                for (r, f) in closest.iter().zip(found.iter_mut()) {
+                    *f = accel.intersect(r);
+                }
+            }
+        }
+    }
+}
 
 /// One path between bounces.
 struct Path {
@@ -40,7 +73,8 @@ struct Path {
 impl<'a> PathTracer<'a> {
     /// `out[i]` = the radiance along camera ray `rays[i]`, whose closest hit
     /// is `hits[i]`, drawing from `samplers[i]`.
-    pub(super) fn wavefront(&self, accel: &dyn Traversal, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64) {
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn wavefront(&self, accel: &dyn Traversal, rays: &[Ray], hits: &[Option<Hit>], samplers: &mut [&mut Sampler], out: &mut [Vec3], ray_count: &mut u64, tracing: Tracing) {
         let m = self.max_depth;
         let counts = |bounce: u32| self.accumulate || bounce == m;
         // Each path is pushed empty and its first vertex made in place
@@ -104,12 +138,7 @@ impl<'a> PathTracer<'a> {
             }
             // Trace: shadow rays as one batch, everything else as another.
             *ray_count += (shadow.len() + closest.len()) as u64;
-            occluded.clear();
-            occluded.resize(shadow.len(), false);
-            accel.occluded_coherent(&shadow, &mut occluded);
-            found.clear();
-            found.resize(closest.len(), None);
-            accel.intersect_batch(&closest, &mut found);
+            tracing.trace(accel, &shadow, &closest, &mut occluded, &mut found);
             // Add what the rays found, in the path-at-a-time order.
             for p in paths.iter_mut() {
                 // The vertex stays in place until its successor replaces it

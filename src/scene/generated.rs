@@ -1,9 +1,10 @@
-//! Procedural benchmark scenes: deterministic geometry that stresses what
-//! separates BVH builders, at any size. Each is named `KIND:N` (N triangles,
-//! `k`/`M` suffixes allowed) on the `bench` command line and as a scene
-//! argument of the renderer (`pathtracer arch:1M`), and gets the
-//! OBJ/PLY defaults of `scene::mesh_scene` (diffuse 0.5, sky light) with a
-//! camera direction chosen to look at the interesting part.
+//! Generated scenes: deterministic geometry that stresses what separates
+//! BVH builders, at any size. Each is named `KIND:N` (N triangles, `k`/`M`
+//! suffixes allowed) — on the `bench` command line and as a scene argument
+//! of the renderer (`pathtracer arch:1M`) — and gets the OBJ/PLY defaults
+//! of `scene::mesh_scene` (diffuse 0.5, sky light) with a camera direction
+//! chosen to look at the interesting part. `subdiv:NAME:N` refines a scene
+//! file found by name; the caller says where names are looked up.
 //!
 //! * `sphere:N` — a lat-long unit sphere: evenly sized, well-shaped
 //!   triangles, the easiest input there is (the poles are degenerate, as in
@@ -25,7 +26,6 @@
 //!   Loop subdivision (smooth, as a denser scan would be) until it has at
 //!   least N triangles: the scanned-mesh case at millions of triangles.
 
-use super::find_scene;
 use crate::error::{Error, Result};
 use crate::rng::Rng;
 use crate::scene::mesh_scene::{self, NamedMesh};
@@ -33,12 +33,17 @@ use crate::scene::{Scene, TriangleMesh};
 use glam::Vec3;
 use std::collections::HashMap;
 use std::f32::consts::{PI, TAU};
+use std::path::PathBuf;
+
+/// Where `subdiv:NAME:N` finds the scene file `NAME` names.
+pub type FindScene<'a> = &'a dyn Fn(&str) -> Result<PathBuf>;
 
 /// The kinds, for `--help` and error messages.
 pub const KINDS: &str = "sphere:N, arch:N, grass:N, stadium:N, subdiv:NAME:N";
 
-/// A generator spec's scene, or `None` when `spec` is not one (a file name).
-pub fn generate(spec: &str) -> Option<Result<Scene>> {
+/// A generator spec's scene, or `None` when `spec` is not one (a file name);
+/// `find` resolves the scene names `subdiv:NAME:N` refines.
+pub fn generate(spec: &str, find: FindScene) -> Option<Result<Scene>> {
     let (kind, rest) = spec.split_once(':')?;
     let run = |n: Result<usize>, f: fn(usize) -> Vec<NamedMesh>, c_dir: Vec3| -> Result<Scene> {
         let n = n?;
@@ -51,7 +56,7 @@ pub fn generate(spec: &str) -> Option<Result<Scene>> {
         "arch" => run(count(spec, rest), arch, Vec3::new(0.5, 0.15, 1.0)),
         "grass" => run(count(spec, rest), |n| vec![named("grass", grass(n))], Vec3::new(0.0, 0.25, 1.0)),
         "stadium" => run(count(spec, rest), stadium, Vec3::new(0.3, 0.5, 1.0)),
-        "subdiv" => subdiv_scene(spec, rest),
+        "subdiv" => subdiv_scene(spec, rest, find),
         _ => return None,
     })
 }
@@ -131,7 +136,7 @@ impl Builder {
 /// A lat-long unit sphere of about `n` triangles (2 · segments · rings).
 pub fn sphere(n: usize) -> TriangleMesh {
     let rings = ((n as f64 / 4.0).sqrt().max(2.0)) as u32;
-    super::lat_long_sphere(2 * rings, rings)
+    lat_long_sphere(2 * rings, rings)
 }
 
 /// A sphere-like blob of radius about `r` at `c` with `n` triangles (a
@@ -281,10 +286,10 @@ fn stadium(n: usize) -> Vec<NamedMesh> {
     vec![named("stadium", s.m), named("teapot", teapot.m)]
 }
 
-fn subdiv_scene(spec: &str, rest: &str) -> Result<Scene> {
+fn subdiv_scene(spec: &str, rest: &str, find: FindScene) -> Result<Scene> {
     let (name, n) = rest.rsplit_once(':').ok_or_else(|| Error::new(format!("{spec}: expected subdiv:NAME:N, e.g. subdiv:bunny:2M")))?;
     let n = count(spec, n)?;
-    let base = crate::scene::load_file(&find_scene(name)?)?;
+    let base = crate::scene::load_file(&find(name)?)?;
     let mut meshes: Vec<NamedMesh> = base
         .shapes
         .iter()
@@ -368,12 +373,56 @@ pub fn loop_subdivide(m: &TriangleMesh) -> TriangleMesh {
     TriangleMesh { positions: out, triangles, normals: Vec::new() }
 }
 
+/// A closed lat-long unit sphere with `2 * segments * rings` triangles
+/// (the pole triangles are degenerate, as in Embree's measurements).
+pub fn lat_long_sphere(segments: u32, rings: u32) -> TriangleMesh {
+    let mut m = TriangleMesh::default();
+    for j in 0..=rings {
+        let th = PI * j as f32 / rings as f32;
+        for i in 0..=segments {
+            let ph = 2.0 * PI * (i % segments) as f32 / segments as f32;
+            m.positions.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()));
+        }
+    }
+    let row = segments + 1;
+    for j in 0..rings {
+        for i in 0..segments {
+            let (a, b, c, d) = (j * row + i, j * row + i + 1, (j + 1) * row + i, (j + 1) * row + i + 1);
+            m.triangles.push([a, c, b]);
+            m.triangles.push([b, c, d]);
+        }
+    }
+    m.compute_normals();
+    m
+}
+
+/// The `sphere:n` scene: a lat-long sphere of about `n` triangles seen
+/// from +z.
+pub fn sphere_scene(n: usize) -> Scene {
+    generate(&format!("sphere:{n}"), &|name| Err(Error::new(format!("{name}: no scene names in sphere:N")))).expect("sphere is a generator").expect("a valid sphere count")
+}
+
+/// The repository's CS184 scene of that name (`scenes/cs184/*/NAME.dae`),
+/// for tests of the library, which run without the command line's search.
+#[cfg(test)]
+pub(crate) fn in_repository(name: &str) -> Result<PathBuf> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/cs184");
+    ["sky", "meshedit", "simple"].iter().map(|d| root.join(d).join(format!("{name}.dae"))).find(|p| p.exists()).ok_or_else(|| Error::new(format!("{name}: not among the repository's scenes")))
+}
+
+/// A generated scene for the library's tests (`subdiv:NAME:N` finds NAME
+/// among the repository's scenes).
+#[cfg(test)]
+pub(crate) fn for_tests(spec: &str) -> Scene {
+    generate(spec, &in_repository).expect("a generator").unwrap_or_else(|e| panic!("{spec}: {e}"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn scene(spec: &str) -> Scene {
-        generate(spec).expect("a generator").unwrap_or_else(|e| panic!("{spec}: {e}"))
+        for_tests(spec)
     }
 
     #[test]
@@ -448,10 +497,10 @@ mod tests {
 
     #[test]
     fn bad_specs_are_refused_and_file_names_are_not_specs() {
-        assert!(generate("bunny.dae").is_none());
-        assert!(generate("/tmp/x:y.obj").is_none());
+        assert!(generate("bunny.dae", &in_repository).is_none());
+        assert!(generate("/tmp/x:y.obj", &in_repository).is_none());
         for (spec, msg) in [("arch:lots", "expected a triangle count"), ("grass:3", "between 8 and 2e8"), ("subdiv:bunny", "expected subdiv:NAME:N")] {
-            let e = generate(spec).unwrap().unwrap_err().0;
+            let e = generate(spec, &in_repository).unwrap().unwrap_err().0;
             assert!(e.contains(msg), "{spec}: {e}");
         }
     }

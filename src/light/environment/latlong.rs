@@ -1,52 +1,19 @@
-//! The environment light (`-e FILE.exr`): radiance from every direction, read
-//! from a latitude-longitude OpenEXR image, seen by every ray that escapes.
-//!
-//! Mapping (CS184's, exactly): θ = acos(d.y) (+y up, θ = 0 the top row),
-//! φ = atan2(−d.z, d.x) + π; texel coordinates x = φ/2π·w, y = θ/π·h, texel
-//! centres at half-integers. Lookup is CS184's bilinear filter: wrapping
-//! horizontally, clamped vertically (constant above the first row's centres
-//! and below the last's). Channels are read by name (R, G, B; any
-//! compression the `exr` crate reads, DWAA/DWAB included); negative texels
-//! (ringing of lossy compression) are clamped to 0.
-//!
-//! Importance sampling, where we differ from CS184: CS184 picks a texel by
-//! luminance × sin θ and returns its *corner* direction with the unfiltered
-//! texel's radiance, a Riemann sum that is biased (w·h discrete directions,
-//! an infinite pdf on row 0, a radiance that is not what escaping rays see).
-//! Here the map is cut into the *patches* of the bilinear lookup — the cells
-//! between four texel centres (w × (h + 1) of them: half-height rows above
-//! the first centres and below the last, where the lookup is clamped), on
-//! each of which the lookup's luminance is one bilinear function f. A patch
-//! is picked with probability ∝ (∫ f over the patch) × sin θ at its centre,
-//! and a point inside it with density ∝ f itself (a linear marginal in y,
-//! then a linear conditional in x, each inverted in closed form from the
-//! leftover of the uniform that picked the patch). So the pdf follows the
-//! radiance inside every patch, not only from patch to patch: a light
-//! sample's luminance ÷ pdf varies only with sin θ across a patch. The pdf
-//! is the exact density of the direction, P(patch)·f(x, y)/∫f ·
-//! w·h / (2π² sin θ) with the sample's own θ; the value returned is the same
-//! bilinear lookup escaping rays see. f > 0 wherever the lookup is non-zero
-//! (both come from the same corners), so the estimator is unbiased.
-//! Measured on a bunny under studio.exr (softboxes with sharp edges) at
-//! `-m 1`, 64 spp, 4 seeds, 256x192: uniform points in texels picked by the
-//! texel's integral had 1.8x the variance of Cycles 3.4 per sample; see
-//! docs/design/light-transport.md.
+//! The latitude-longitude map: its texels, CS184's lookup, and its own
+//! importance sampling by the patches of the bilinear lookup (see the
+//! parent module for the model).
 
-use super::env_lobe::EnvLobe;
-use super::env_product::EnvProduct;
-use crate::error::Result;
-use crate::render::illuminance;
+use crate::color::illuminance;
 use glam::Vec3;
 use std::f64::consts::PI;
-use std::path::Path;
 
 /// sin θ of the f32 directions nearest the poles (1 − 2⁻²⁴ in y): where a
 /// direction rounds onto a pole, `sample` and `pdf` both use this value, so
 /// they stay consistent (the solid angle involved is ~1e-7 sr).
 const POLE_SIN: f64 = 3.4526698e-4;
 
+/// The map's texels and the tables of its own importance sampling.
 #[derive(Debug)]
-pub struct EnvMap {
+pub struct LatLong {
     pub path: String,
     pub width: usize,
     pub height: usize,
@@ -60,39 +27,14 @@ pub struct EnvMap {
     pub(super) col_cdf: Vec<f64>,
     /// Probability of each patch ((h + 1) × w, row-major).
     pub(super) prob: Vec<f64>,
-    /// The map × cosine-bound tables (`env_product`).
-    pub product: Option<EnvProduct>,
-    /// The glossy-lobe tables over the product's tiles (`env_lobe`).
-    pub lobe: Option<EnvLobe>,
 }
 
-impl EnvMap {
-    pub fn load(path: &Path) -> Result<EnvMap> {
-        if !path.exists() {
-            crate::bail!("{}: environment map not found", path.display());
-        }
-        let img = crate::image_io::read_exr(path)?;
-        let (w, h) = (img.width as usize, img.height as usize);
-        if w < 2 || h < 2 {
-            crate::bail!("{}: environment map is {w}x{h}; a latitude-longitude map needs at least 2x2 texels", path.display());
-        }
-        let mut texels = img.pixels;
-        let mut bad = 0usize;
-        for t in texels.iter_mut() {
-            if !t.is_finite() {
-                bad += 1;
-            }
-            *t = t.max(Vec3::ZERO);
-        }
-        if bad > 0 {
-            crate::bail!("{}: environment map has {bad} texels that are NaN or infinite", path.display());
-        }
-        Ok(Self::from_texels(path.display().to_string(), w, h, texels))
-    }
-
-    pub fn from_texels(path: String, width: usize, height: usize, texels: Vec<Vec3>) -> EnvMap {
+impl LatLong {
+    /// The map of `texels` (row-major, row 0 the top) and its sampling
+    /// tables; all zero where the map is black.
+    pub fn from_texels(path: String, width: usize, height: usize, texels: Vec<Vec3>) -> LatLong {
         let (w, h) = (width, height);
-        let mut map = EnvMap { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)], product: None, lobe: None };
+        let mut map = LatLong { path, width, height, texels, row_cdf: vec![0.0; h + 2], col_cdf: vec![0.0; (w + 1) * (h + 1)], prob: vec![0.0; w * (h + 1)] };
         let mut weight = vec![0.0f64; w * (h + 1)];
         for q in 0..=h {
             let (y0, y1) = map.patch_rows(q);
@@ -115,9 +57,6 @@ impl EnvMap {
                 }
             }
             map.row_cdf[h + 1] = 1.0;
-            let product = EnvProduct::build(&map);
-            map.lobe = Some(EnvLobe::build(&product));
-            map.product = Some(product);
         }
         map
     }
@@ -309,9 +248,9 @@ mod tests {
     use super::*;
     use crate::rng::Rng;
 
-    fn map(w: usize, h: usize, f: impl Fn(usize, usize) -> Vec3) -> EnvMap {
+    fn map(w: usize, h: usize, f: impl Fn(usize, usize) -> Vec3) -> LatLong {
         let t = (0..h).flat_map(|j| (0..w).map(move |i| (i, j))).map(|(i, j)| f(i, j)).collect();
-        EnvMap::from_texels("test".into(), w, h, t)
+        LatLong::from_texels("test".into(), w, h, t)
     }
 
     #[test]

@@ -7,7 +7,7 @@
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::light::{Light, Lights};
-use crate::scene::{Bsdf, Scene, Shape};
+use crate::scene::{Surface, Scene, Shape};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -24,21 +24,21 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
         let m = &scene.materials[obj.material];
         // `albedo` stays the diffuse colour (0 for everything else), so
         // exporters that know only diffuse surfaces can refuse the rest by `bsdf`.
-        let (albedo, bsdf) = match m.bsdf {
-            Bsdf::Diffuse { albedo } => (albedo, json!({"type": "diffuse", "albedo": v3(albedo), "two_sided": true})),
-            Bsdf::Emission { .. } => (glam::Vec3::ZERO, json!({"type": "emission"})),
-            Bsdf::Mirror { reflectance } => (glam::Vec3::ZERO, json!({"type": "mirror", "reflectance": v3(reflectance), "two_sided": true})),
-            Bsdf::Glass { reflectance, transmittance, ior, roughness } => (
+        let (albedo, bsdf) = match m.surface {
+            Surface::Diffuse { albedo } => (albedo, json!({"type": "diffuse", "albedo": v3(albedo), "two_sided": true})),
+            Surface::Emission { .. } => (glam::Vec3::ZERO, json!({"type": "emission"})),
+            Surface::Mirror { reflectance } => (glam::Vec3::ZERO, json!({"type": "mirror", "reflectance": v3(reflectance), "two_sided": true})),
+            Surface::Glass { reflectance, transmittance, ior, roughness } => (
                 glam::Vec3::ZERO,
                 json!({"type": "glass", "reflectance": v3(reflectance), "transmittance": v3(transmittance), "ior": ior, "roughness": roughness,
                        "fresnel": "exact dielectric", "radiance_scale": "(eta_i/eta_t)^2 on transmission"}),
             ),
-            Bsdf::Refraction { transmittance, ior, roughness } => (
+            Surface::Refraction { transmittance, ior, roughness } => (
                 glam::Vec3::ZERO,
                 json!({"type": "refraction", "transmittance": v3(transmittance), "ior": ior, "roughness": roughness,
                        "fresnel": "none (everything transmitted, total internal reflection absorbs)", "radiance_scale": "(eta_i/eta_t)^2"}),
             ),
-            Bsdf::Microfacet { alpha, eta, k } => (
+            Surface::Microfacet { alpha, eta, k } => (
                 glam::Vec3::ZERO,
                 json!({"type": "microfacet", "distribution": "beckmann", "alpha": alpha, "eta": v3(eta), "k": v3(k),
                        "masking": "separable Smith G1(wo) G1(wi), exact Beckmann lambda", "fresnel": "exact conductor at wi.h", "two_sided": false}),
@@ -88,10 +88,10 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
     let mut light_list = Vec::new();
     for (k, l) in lights.lights.iter().enumerate() {
         light_list.push(match l {
-            Light::Point { position, intensity } => json!({"type": "point", "position": v3(*position), "intensity": v3(*intensity)}),
-            Light::Directional { to_light, irradiance } => json!({"type": "directional", "to_light": v3(*to_light), "irradiance": v3(*irradiance)}),
-            Light::Hemisphere { radiance, .. } => json!({"type": "hemisphere", "up": [0.0, 1.0, 0.0], "radiance": v3(*radiance)}),
-            Light::Rect { corner, ex, ey, normal, radiance, .. } => {
+            Light::Point(crate::light::PointLight { position, intensity }) => json!({"type": "point", "position": v3(*position), "intensity": v3(*intensity)}),
+            Light::Directional(crate::light::DirectionalLight { to_light, irradiance }) => json!({"type": "directional", "to_light": v3(*to_light), "irradiance": v3(*irradiance)}),
+            Light::Hemisphere(crate::light::HemisphereLight { radiance, .. }) => json!({"type": "hemisphere", "up": [0.0, 1.0, 0.0], "radiance": v3(*radiance)}),
+            Light::Rect(crate::light::RectLight { corner, ex, ey, normal, radiance, .. }) => {
                 json!({"type": "rect", "corner": v3(*corner), "ex": v3(*ex), "ey": v3(*ey), "normal": v3(*normal), "radiance": v3(*radiance), "visible": false})
             }
             Light::Environment(e) => {
@@ -104,7 +104,7 @@ pub fn export(scene: &Scene, camera: &Camera, lights: &Lights, dir: &Path) -> Re
                        "filter": "bilinear, wrapping in u, clamped in v"})
             }
             // Emissive shapes are described with the shape itself.
-            Light::Mesh { .. } | Light::Sphere { .. } => json!({"type": "emissive_shape", "shape": lights.of_geometry.iter().position(|g| *g == Some(k))}),
+            Light::Mesh(_) | Light::Sphere(_) => json!({"type": "emissive_shape", "shape": lights.of_geometry.iter().position(|g| *g == Some(k))}),
         });
     }
     let c2w = camera.c2w;

@@ -29,8 +29,8 @@
 //! Not in CS184, Cycles 3.4 or Mitsuba 3: they sample the map alone at
 //! every vertex.
 
-use super::env_product::{cone, EnvProduct, SLACK};
-use super::environment::EnvMap;
+use super::product::{cone, EnvProduct, SLACK};
+use super::LatLong;
 use glam::Vec3;
 use std::f64::consts::PI;
 
@@ -142,7 +142,7 @@ impl EnvLobe {
 
     /// A direction from `lobe`'s tiles: its radiance and pdf; `None` where
     /// nothing can be drawn.
-    pub fn sample(&self, pr: &EnvProduct, env: &EnvMap, lobe: &Lobe, u: (f32, f32)) -> Option<(Vec3, Vec3, f32)> {
+    pub fn sample(&self, pr: &EnvProduct, env: &LatLong, lobe: &Lobe, u: (f32, f32)) -> Option<(Vec3, Vec3, f32)> {
         let (tiles, running) = self.list(lobe);
         // The tile from u.1, the point in it from the leftover and u.0.
         let target = u.1 * running[running.len() - 1];
@@ -158,7 +158,7 @@ impl EnvLobe {
     }
 
     /// Solid-angle pdf of `sample` for direction `d`.
-    pub fn pdf(&self, pr: &EnvProduct, env: &EnvMap, lobe: &Lobe, d: Vec3) -> f32 {
+    pub fn pdf(&self, pr: &EnvProduct, env: &LatLong, lobe: &Lobe, d: Vec3) -> f32 {
         let Some((p, q, pdf)) = env.pdf_with_patch(d) else { return 0.0 };
         let k = pr.tile_of(p, q);
         let (tiles, running) = self.list(lobe);
@@ -172,7 +172,8 @@ impl EnvLobe {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use super::super::env_product::tests::{map, random_unit};
+    use super::super::product::tests::{map, random_unit};
+    use super::super::EnvMap;
     use crate::bsdf::microfacet::Microfacet;
     use crate::rng::Rng;
     use crate::sampling::Frame;
@@ -245,7 +246,7 @@ mod tests {
         let env = map();
         let (pr, lobes) = tables(&env);
         let copper = Microfacet { alpha: 0.1, eta: Vec3::new(0.2, 0.92, 1.1), k: Vec3::new(3.9, 2.45, 2.14), front: true };
-        let lum = |v: Vec3| crate::render::illuminance(v) as f64;
+        let lum = |v: Vec3| crate::color::illuminance(v) as f64;
         let power = |a: f32, b: f32| (a * a / (a * a + b * b)) as f64;
         let stats = |xs: &[f64]| {
             let m = xs.iter().sum::<f64>() / xs.len() as f64;

@@ -185,13 +185,13 @@ pub fn verify(paths: &[PathBuf]) -> Result<()> {
 
 /// The `merge` command: write the images the one-machine render writes.
 pub fn run(paths: &[PathBuf], png: &Path, exr: Option<&Path>, variance_exr: Option<&Path>) -> Result<()> {
-    crate::cli::check_output_names(Some(png), exr, variance_exr)?;
+    super::images::check_output_names(Some(png), exr, variance_exr)?;
     let m = merge(paths)?;
     let spp = m.header.spp()?;
     let out = &m.output;
     // The rate image where the parts ran adaptive sampling, as the render does.
     let adaptive = m.header.get("adaptive").is_some_and(|a| a != "none");
-    let written = crate::cli::write_images(out, png, adaptive, exr, variance_exr, spp)?;
+    let written = super::images::write_images(out, png, adaptive, exr, variance_exr, spp)?;
     let samples: u64 = out.samples.iter().map(|&n| n as u64).sum();
     if m.bad_samples > 0 {
         eprintln!("warning: {} samples had a NaN or out-of-range value (counted as 0 or ±2^36)", m.bad_samples);

@@ -2,7 +2,7 @@
 //! cosine, approximately: the product of the map with a conservative bound
 //! of the cosine, per bin of receiver normals.
 //!
-//! The map's own sampler (`EnvMap::sample`) spends about half its samples
+//! The map's own sampler (`LatLong::sample`) spends about half its samples
 //! below the receiver's horizon, where they add nothing. Here the patch grid
 //! is cut into tiles (at most 64 × 32) and the sphere of normals into
 //! 16 × 32 latitude-longitude bins. For normal bin b and tile t, c(b, t) is
@@ -11,7 +11,7 @@
 //! [0, π/2]). A sample at a receiver with shading normal n picks the tile
 //! with probability ∝ (the tile's share of the map's patch table) × c(b, t)
 //! for n's bin b, then a patch inside the tile by the patch table, then a
-//! point in the patch as `EnvMap::sample` does. Its pdf is the map's pdf ×
+//! point in the patch as `LatLong::sample` does. Its pdf is the map's pdf ×
 //! c(b, t) / Z_b (Z_b = Σ over tiles of share × c). Since c bounds the cosine
 //! from above, c > 0 wherever some normal of the bin sees the direction
 //! above its horizon: the pdf covers everything the integrand covers, so
@@ -23,7 +23,7 @@
 //! alone. Used only at vertices whose BSDF does not transmit (a transmitting
 //! BSDF needs light from below its horizon too).
 
-use super::environment::EnvMap;
+use super::LatLong;
 use glam::Vec3;
 use std::f64::consts::PI;
 
@@ -105,7 +105,7 @@ fn bin_of(n: Vec3) -> usize {
 }
 
 impl EnvProduct {
-    pub(super) fn build(env: &EnvMap) -> EnvProduct {
+    pub(super) fn build(env: &LatLong) -> EnvProduct {
         let (w, h) = (env.width, env.height);
         let (tx, ty) = (TILES_X.min(w), TILES_Y.min(h + 1));
         let col_start: Vec<usize> = (0..=tx).map(|i| i * w / tx).collect();
@@ -120,7 +120,7 @@ impl EnvProduct {
         }
         // Each tile's share of the patch table and its direction cone. Patch
         // column p spans x ∈ [p + 0.5, p + 1.5) texels, φ = x / w · 2π in the
-        // map's convention (`EnvMap::direction`: d = (−cos φ sin θ, cos θ,
+        // map's convention (`LatLong::direction`: d = (−cos φ sin θ, cos θ,
         // sin φ sin θ)), which is `polar`'s with φ' = π − φ.
         let tiles = tx * ty;
         let mut share = vec![0.0f64; tiles];
@@ -200,7 +200,7 @@ impl EnvProduct {
 
     /// Solid-angle pdf of `sample` for direction `d` at a receiver with
     /// shading normal `n`.
-    pub fn pdf(&self, env: &EnvMap, n: Vec3, d: Vec3) -> f32 {
+    pub fn pdf(&self, env: &LatLong, n: Vec3, d: Vec3) -> f32 {
         let Some((p, q, pdf)) = env.pdf_with_patch(d) else { return 0.0 };
         (pdf as f64 * self.scale(bin_of(n), p, q)) as f32
     }
@@ -208,7 +208,7 @@ impl EnvProduct {
     /// A direction for a receiver with shading normal `n`: its radiance
     /// (the lookup escaping rays see) and its pdf. `None` where nothing
     /// can be drawn.
-    pub fn sample(&self, env: &EnvMap, n: Vec3, u: (f32, f32)) -> Option<(Vec3, Vec3, f32)> {
+    pub fn sample(&self, env: &LatLong, n: Vec3, u: (f32, f32)) -> Option<(Vec3, Vec3, f32)> {
         let b = bin_of(n);
         if !(self.z[b] > 0.0) || env.is_black() {
             return None;
@@ -231,7 +231,7 @@ impl EnvProduct {
     /// A direction in tile `k` drawn by the map's table restricted to the
     /// tile (`v` picks the row, `u0` the patch in it): direction, radiance,
     /// the map's own pdf and the patch.
-    pub(super) fn sample_tile(&self, env: &EnvMap, k: usize, v: f64, u0: f64) -> Option<(Vec3, Vec3, f32, usize, usize)> {
+    pub(super) fn sample_tile(&self, env: &LatLong, k: usize, v: f64, u0: f64) -> Option<(Vec3, Vec3, f32, usize, usize)> {
         let w = env.width;
         let tx = self.col_start.len() - 1;
         let (ti, tj) = (k % tx, k / tx);
@@ -280,6 +280,7 @@ impl EnvProduct {
 #[cfg(test)]
 pub(super) mod tests {
     use super::*;
+    use super::super::EnvMap;
     use crate::rng::Rng;
 
     /// A map with a bright patch, a dim gradient and a black band.
@@ -363,7 +364,7 @@ pub(super) mod tests {
         let env = map();
         let prod = EnvProduct::build(&env);
         let mut rng = Rng::new(5, 2);
-        let lum = |d: Vec3| crate::render::illuminance(env.eval(d)) as f64;
+        let lum = |d: Vec3| crate::color::illuminance(env.eval(d)) as f64;
         for n in [Vec3::Y, Vec3::new(0.6, -0.8, 0.0), Vec3::new(0.0, 0.28, -0.96)] {
             let f = |d: Vec3| lum(d) * (d.dot(n) as f64).max(0.0);
             let stats = |xs: &[f64]| {

@@ -1,5 +1,5 @@
-//! The ray sets the benchmark times, public so that the cross-check tests
-//! trace exactly these: camera rays through pixel centres, incoherent
+//! Ray workloads for the traversals: the sets the benchmark times and the
+//! cross-check tests trace — camera rays through pixel centres, incoherent
 //! random rays, shadow rays from the camera rays' hits towards one point
 //! above the scene, and diffuse rays leaving those hits in
 //! cosine-distributed directions (the rays a path tracer traces most).
