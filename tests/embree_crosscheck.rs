@@ -8,6 +8,7 @@
 
 mod common;
 
+use pathtracer::accel::agreement::{self, Agreement};
 use pathtracer::accel::{BackendKind, Hit, Traversal};
 use pathtracer::accel::workloads::{camera_rays, random_rays};
 use pathtracer::camera::Camera;
@@ -25,71 +26,22 @@ fn embrees() -> Vec<BackendKind> {
     v
 }
 
-const REL: f32 = 1e-5;
-
+/// 1e-5 relative (`accel::agreement::REL`).
 fn close(a: f32, b: f32) -> bool {
-    (a - b).abs() <= REL * a.abs().max(b.abs()).max(1e-30)
+    (a - b).abs() <= agreement::REL * a.abs().max(b.abs()).max(1e-30)
 }
 
-#[derive(Default, Debug)]
-struct Tally {
-    rays: usize,
-    hits: usize,
-    ties: usize,
-    /// Same primitive, t or u/v apart by more than 1e-5 but within the f32 bound.
-    widened: usize,
-    errors: Vec<String>,
-}
-
-/// Compare one ray. A different primitive is accepted as a tie only when the
-/// two backends' hits lie within 1e-5 relative t (two nearest candidates at
-/// the same distance, e.g. a shared edge); everything else must agree.
-///
-/// t must agree to 1e-5 relative and barycentrics to 1e-5, or, on triangles that are small seen from
-/// far away, to their f32 error bound: both algorithms shear or project
-/// coordinates of size D (the distance from the ray origin), so u and v carry
-/// an error of a few ulps times D / (h cos), h the triangle's smallest height
-/// and cos the incidence cosine.
+/// Compare one ray (`accel::agreement`); whether it was a tie, a widened
+/// agreement, or why it differs.
 fn compare(scene: &Scene, i: usize, r: &Ray, n: Option<Hit>, e: Option<Hit>, occ_n: bool, occ_e: bool) -> (bool, bool, Option<String>) {
-    let mut tie = false;
-    let mut widened = false;
-    let err = match (n, e) {
-        (None, None) => None,
-        (Some(a), Some(b)) if (a.geom_id, a.prim_id) == (b.geom_id, b.prim_id) => {
-            let du = (a.u - b.u).abs().max((a.v - b.v).abs());
-            let (bound, t_abs) = error_bounds(scene, r, &a);
-            let dt = (a.t - b.t).abs();
-            let t_ok = close(a.t, b.t) || dt <= t_abs;
-            widened = (du > REL && du <= bound) || (!close(a.t, b.t) && t_ok);
-            (!t_ok || du > bound.max(REL)).then(|| format!("ray {i}: t/u/v differ: native {a:?} embree {b:?} (uv bound {bound:e})"))
-        }
-        (Some(a), Some(b)) if close(a.t, b.t) => {
-            tie = true;
-            None
-        }
-        _ => Some(format!("ray {i} {r:?}: native {n:?} embree {e:?}")),
+    let (tie, widened, err) = match agreement::compare(scene, r, n, e) {
+        Agreement::Same => (false, false, None),
+        Agreement::Tie => (true, false, None),
+        Agreement::Widened => (false, true, None),
+        Agreement::Differ(why) => (false, false, Some(format!("ray {i} {r:?}: native against embree: {why}"))),
     };
     let err = err.or_else(|| (occ_n != occ_e).then(|| format!("ray {i} {r:?}: occluded native {occ_n} embree {occ_e}")));
     (tie, widened, err)
-}
-
-/// f32 error bounds of (u and v, t) for a hit on a triangle seen from distance D.
-/// t's absolute error is a few ulps of D (in units of the ray direction),
-/// which exceeds 1e-5 relative only when t is tiny compared to D.
-fn error_bounds(scene: &Scene, r: &Ray, h: &Hit) -> (f32, f32) {
-    match &scene.shapes[h.geom_id as usize] {
-        pathtracer::scene::Shape::Mesh(m) => {
-            let [a, b, c] = m.triangles[h.prim_id as usize].map(|i| m.positions[i as usize]);
-            let area2 = (b - a).cross(c - a).length();
-            let longest = (b - a).length().max((c - b).length()).max((a - c).length());
-            let height = area2 / longest;
-            let d = [a, b, c].iter().map(|p| (*p - r.origin).length()).fold(0.0f32, f32::max);
-            // Grazing incidence stretches the projected triangle's errors by 1/cos.
-            let cos = ((b - a).cross(c - a).normalize().dot(r.dir.normalize())).abs().max(1e-3);
-            (16.0 * f32::EPSILON * d / (height * cos), 16.0 * f32::EPSILON * d / r.dir.length())
-        }
-        _ => (REL, 0.0),
-    }
 }
 
 fn cross_check(scene: &Scene, native: &dyn Traversal, embree: &dyn Traversal, rays: &[Ray]) -> Tally {
@@ -104,7 +56,7 @@ fn cross_check(scene: &Scene, native: &dyn Traversal, embree: &dyn Traversal, ra
             // surface have a t that neither backend knows to 0.1 %).
             let err = err.or_else(|| {
                 let h = n?;
-                let margin = (h.t * 1e-3).max(4.0 * error_bounds(scene, r, &h).1);
+                let margin = (h.t * 1e-3).max(4.0 * agreement::error_bounds(scene, r, &h).1);
                 if h.t - margin <= r.tmin {
                     return None;
                 }

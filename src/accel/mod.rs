@@ -4,6 +4,7 @@
 //! (or *does it hit anything*). It knows nothing of normals, materials or
 //! lights; `scene::Interaction` describes the hit from the record returned here.
 
+pub mod agreement;
 pub mod brute;
 pub mod bvh;
 mod huge;

@@ -10,6 +10,7 @@ pub mod export;
 pub mod fuzz;
 pub mod images;
 pub mod merge;
+pub mod validate;
 
 /// The backends' build options the environment asks for
 /// (`PATHTRACER_NATIVE_*`, `PATHTRACER_EMBREE_CONFIG`; a bad value is

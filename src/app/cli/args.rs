@@ -94,6 +94,12 @@ pub enum Command {
         #[arg(long, value_name = "FILE")]
         variance_exr: Option<PathBuf>,
     },
+    /// Check a scene in every way we can: every backend's hits against
+    /// native's, the path tracer against BDPT and light tracing, adaptive
+    /// sampling against fixed-rate sampling, and the reference renderers;
+    /// one verdict line per check, exit status 0 (all pass), 1 (a check
+    /// failed) or 2 (could not decide or run).
+    Validate(crate::app::validate::ValidateArgs),
     /// Check partials on their own (header and records checksums): one line
     /// per partial, a non-zero exit when any is damaged.
     Verify {

@@ -14,7 +14,7 @@ use crate::render::{self, Adaptive, Region};
 use crate::sampler::SamplerKind;
 use clap::ValueEnum;
 
-pub(super) struct Flags {
+pub(crate) struct Flags {
     pub width: u32,
     pub height: u32,
     pub spp: u32,
@@ -29,7 +29,7 @@ pub(super) struct Flags {
     pub sampler: SamplerKind,
 }
 
-pub(super) fn check_flags(a: &RenderArgs) -> Result<Flags> {
+pub(crate) fn check_flags(a: &RenderArgs) -> Result<Flags> {
     let (width, height) = frame_size(a)?;
     let spp = a.spp.unwrap_or(1);
     if spp == 0 || spp > 1 << 20 {
@@ -184,7 +184,7 @@ fn parse_strategy(text: &str) -> Result<Technique> {
 }
 
 /// A checked `--part I/N`.
-pub(super) struct Part {
+pub(crate) struct Part {
     pub index: u32,
     pub count: u32,
     pub kind: crate::partial::SplitKind,

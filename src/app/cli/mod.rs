@@ -4,8 +4,8 @@
 
 mod args;
 pub mod docs;
-mod flags;
-mod render;
+pub(crate) mod flags;
+pub(crate) mod render;
 mod usage;
 
 pub use args::{BdptLightPaths, Cli, Command, EnvSamplingArg, IntegratorKind, LightPickArg, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg};
@@ -86,6 +86,7 @@ where
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Some(Command::Bench(b)) => crate::app::bench::run(&b),
+        Some(Command::Validate(v)) => crate::app::validate::run(&v),
         Some(Command::Compare { reference, images }) => compare(&reference, &images),
         Some(Command::Merge { partials, output, exr, variance_exr }) => {
             crate::app::merge::run(&partials, &output, exr.as_deref(), variance_exr.as_deref())

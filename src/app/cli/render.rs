@@ -182,13 +182,13 @@ pub fn load_scene(path: Option<&Path>) -> Result<Scene> {
 }
 
 /// The environment map of `-e`, loaded and tabulated for sampling.
-pub(super) fn load_environment(a: &RenderArgs) -> Result<Option<std::sync::Arc<crate::light::EnvMap>>> {
+pub(crate) fn load_environment(a: &RenderArgs) -> Result<Option<std::sync::Arc<crate::light::EnvMap>>> {
     a.environment.as_deref().map(|p| crate::light::EnvMap::load(p).map(std::sync::Arc::new)).transpose()
 }
 
 /// CS184's camera placement, then `-r` (crop, or scale with --keep-fov), then
 /// `-c`, then `lens` (`-b`, `-d` from `lens_flags`).
-pub(super) fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32, lens: (Option<f32>, Option<f32>)) -> Result<Camera> {
+pub(crate) fn setup_camera(a: &RenderArgs, scene: &Scene, width: u32, height: u32, lens: (Option<f32>, Option<f32>)) -> Result<Camera> {
     let mut camera = Camera::from_scene(scene);
     if a.resolution.is_some() {
         if a.keep_fov {

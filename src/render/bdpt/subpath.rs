@@ -141,7 +141,19 @@ impl Bdpt<'_> {
         if !beta.is_finite() || beta == Vec3::ZERO {
             return;
         }
-        let ray = y0.it.spawn_ray(e.dir);
+        let ray = if e.n == Vec3::ZERO {
+            // A point light has no surface to step off: its first ray
+            // leaves the point itself, past what lies within the step a
+            // surface's rays take (`offset_ray_origin`). Next-event
+            // estimation ends its shadow rays that far short of the light
+            // too (`PointLight::sample`), so both see the same occluders: a
+            // point light in the plane of a surface (CBempty's, on its
+            // lamp) is not shadowed by that surface, whatever the rounding.
+            let step = crate::sampling::OFFSET_ULPS * crate::sampling::ulp(e.magnitude);
+            Ray::with_range(e.p, e.dir, step, f32::INFINITY)
+        } else {
+            y0.it.spawn_ray(e.dir)
+        };
         self.walk(accel, Walk::start(ray, beta, e.pdf_dir, false), None, Mode::Importance, sampler, path, max, rays, &mut Branches::none());
     }
 
