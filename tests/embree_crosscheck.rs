@@ -26,6 +26,16 @@ fn embrees() -> Vec<BackendKind> {
     v
 }
 
+#[derive(Default, Debug)]
+struct Tally {
+    rays: usize,
+    hits: usize,
+    ties: usize,
+    /// Same primitive, t or u/v apart by more than 1e-5 but within the f32 bound.
+    widened: usize,
+    errors: Vec<String>,
+}
+
 /// 1e-5 relative (`accel::agreement::REL`).
 fn close(a: f32, b: f32) -> bool {
     (a - b).abs() <= agreement::REL * a.abs().max(b.abs()).max(1e-30)
@@ -38,6 +48,7 @@ fn compare(scene: &Scene, i: usize, r: &Ray, n: Option<Hit>, e: Option<Hit>, occ
         Agreement::Same => (false, false, None),
         Agreement::Tie => (true, false, None),
         Agreement::Widened => (false, true, None),
+        Agreement::Crack => (false, false, Some(format!("ray {i} {r:?}: a vertex crack"))),
         Agreement::Differ(why) => (false, false, Some(format!("ray {i} {r:?}: native against embree: {why}"))),
     };
     let err = err.or_else(|| (occ_n != occ_e).then(|| format!("ray {i} {r:?}: occluded native {occ_n} embree {occ_e}")));

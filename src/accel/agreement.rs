@@ -26,13 +26,19 @@ pub enum Agreement {
     /// The same primitive, t or u/v apart by more than 1e-5 but within the
     /// f32 error bound of a small triangle seen from far.
     Widened,
+    /// A ray through a vertex one backend passes while the other hits the
+    /// vertex (set by a caller that knows the ray's aim and asked brute
+    /// force; `compare` never returns it).
+    Crack,
     /// Different answers: why, in words.
     Differ(String),
 }
 
 /// f32 error bounds of (u and v, t) for a hit on a triangle seen from distance D.
 /// t's absolute error is a few ulps of D (in units of the ray direction),
-/// which exceeds 1e-5 relative only when t is tiny compared to D.
+/// which exceeds 1e-5 relative only when t is tiny compared to D; a ray
+/// grazing the triangle's plane stretches both by 1/cos (a plane distance's
+/// rounding moves the crossing along the ray by that much more).
 pub fn error_bounds(scene: &Scene, r: &Ray, h: &Hit) -> (f32, f32) {
     match &scene.shapes[h.geom_id as usize] {
         Shape::Mesh(m) => {
@@ -43,7 +49,7 @@ pub fn error_bounds(scene: &Scene, r: &Ray, h: &Hit) -> (f32, f32) {
             let d = [a, b, c].iter().map(|p| (*p - r.origin).length()).fold(0.0f32, f32::max);
             // Grazing incidence stretches the projected triangle's errors by 1/cos.
             let cos = ((b - a).cross(c - a).normalize().dot(r.dir.normalize())).abs().max(1e-3);
-            (16.0 * f32::EPSILON * d / (height * cos), 16.0 * f32::EPSILON * d / r.dir.length())
+            (16.0 * f32::EPSILON * d / (height * cos), 16.0 * f32::EPSILON * d / (r.dir.length() * cos))
         }
         _ => (REL, 0.0),
     }

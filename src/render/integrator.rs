@@ -44,6 +44,11 @@ pub struct BdptOptions {
     pub technique: Technique,
     /// Which light subpaths go on past their first bounce.
     pub light_paths: LightPaths,
+    /// Whether lights no ray finds (point, directional, CGL area lights
+    /// without geometry) light the scene through mirrors and glass: their
+    /// caustics, which the path tracer cannot sample (see
+    /// `bdpt::Bdpt::with_unseen_light_caustics`).
+    pub unseen_light_caustics: bool,
 }
 
 /// An integrator and its options, checked once.
@@ -158,7 +163,7 @@ impl IntegratorSpec {
                 light_samples: o.light_samples,
                 russian_roulette: o.russian_roulette,
             }),
-            IntegratorSpec::Bdpt(o) => Box::new(Bdpt::new(scene, lights, camera, width, height, region, o.bounces.max_depth, o.bounces.accumulate, o.technique)?.with_light_paths(o.light_paths)),
+            IntegratorSpec::Bdpt(o) => Box::new(Bdpt::new(scene, lights, camera, width, height, region, o.bounces.max_depth, o.bounces.accumulate, o.technique)?.with_light_paths(o.light_paths).with_unseen_light_caustics(o.unseen_light_caustics)),
             IntegratorSpec::LightTracing(b) => Box::new(Bdpt::new(scene, lights, camera, width, height, region, b.max_depth, b.accumulate, Technique::LightTracing)?),
         })
     }
@@ -173,7 +178,7 @@ mod tests {
         let b = Bounces { max_depth: 5, accumulate: true };
         let specs = [
             IntegratorSpec::Path(PathOptions { bounces: b, light_samples: 1, hemisphere: false, russian_roulette: true, specular_guide: 0.1 }),
-            IntegratorSpec::Bdpt(BdptOptions { bounces: b, technique: Technique::Bidirectional, light_paths: LightPaths::Specular }),
+            IntegratorSpec::Bdpt(BdptOptions { bounces: b, technique: Technique::Bidirectional, light_paths: LightPaths::Specular, unseen_light_caustics: true }),
             IntegratorSpec::LightTracing(b),
             IntegratorSpec::Normals,
             IntegratorSpec::Depth,

@@ -26,7 +26,9 @@ Examples:
   pathtracer merge p0.ptp p1.ptp -f out.png
       A render split in two, merged into the one-machine image, byte for byte.
   pathtracer bench cow CBbunny
-      BVH build time and ray throughput per backend.";
+      BVH build time and ray throughput per backend.
+  pathtracer validate scene.dae -m 5 --budget 5m --report checks
+      Check a scene every way we can (backends, estimators, references); exit 0, 1 or 2.";
 
 /// A whole number of 0 or more, answered in one line when it is not one
 /// (clap's own parsers would say "-1 is not in 0..=4294967295").

@@ -63,8 +63,8 @@ pub fn completions(shell: clap_complete::Shell, out: &mut dyn std::io::Write) {
 /// reference's "Exit status").
 pub const EXIT_STATUS: [(u8, &str); 3] = [
     (0, "Success: the images, partials or tables were written (verify: every partial is intact)."),
-    (1, "The work failed: a file is missing, damaged or unsupported, a render or write failed, or (verify) a partial is damaged. One line on standard error names the file and the problem; nothing partial is left behind."),
-    (2, "The command line is wrong: an unknown command or option, a missing or malformed value, a value out of range, or flags that do not go together. One line on standard error says what is accepted."),
+    (1, "The work failed: a file is missing, damaged or unsupported, a render or write failed, (verify) a partial is damaged, or (validate) a check failed. One line on standard error names the file and the problem; nothing partial is left behind."),
+    (2, "The command line is wrong: an unknown command or option, a missing or malformed value, a value out of range, or flags that do not go together; or (validate) a check could not be decided within the budget, or could not run. One line on standard error says what is accepted, or which checks to read."),
 ];
 
 /// The environment variables the program reads when it runs (the build's

@@ -157,6 +157,7 @@ fn integrator_spec(a: &RenderArgs, adaptive: bool) -> Result<IntegratorSpec> {
                 Some(BdptLightPaths::All) => LightPaths::All,
                 None | Some(BdptLightPaths::Specular) => LightPaths::Specular,
             },
+            unseen_light_caustics: true,
         }),
         IntegratorKind::Light => IntegratorSpec::LightTracing(bounces),
         IntegratorKind::Normals => IntegratorSpec::Normals,

@@ -35,8 +35,24 @@ fn scene_flags(a: &RenderArgs) -> Vec<String> {
     v
 }
 
+/// The references asked for: every one by default, none for `none`.
+fn asked_for(asked: &[String]) -> Vec<String> {
+    if asked.is_empty() {
+        ALL.iter().map(|s| s.to_string()).collect()
+    } else {
+        asked.iter().filter(|r| r.as_str() != "none").cloned().collect()
+    }
+}
+
+/// Whether `run` will render anything (a reference asked for, the harness
+/// here and installed): the budget's share for references is spent on the
+/// other checks otherwise.
+pub fn will_render(asked: &[String]) -> bool {
+    !asked_for(asked).is_empty() && harness().is_some_and(|d| d.join(".venv/bin/python").is_file())
+}
+
 pub fn run(scene: &Path, a: &RenderArgs, asked: &[String], budget: Duration, report: Option<&Path>) -> Vec<Check> {
-    let refs: Vec<String> = if asked.is_empty() { ALL.iter().map(|s| s.to_string()).collect() } else { asked.iter().filter(|r| r.as_str() != "none").cloned().collect() };
+    let refs = asked_for(asked);
     if refs.is_empty() {
         return Vec::new();
     }

@@ -123,6 +123,13 @@ pub struct Bdpt<'a> {
     /// environment map): strategy s = 0 for each.
     sky: Vec<usize>,
     light_paths: LightPaths,
+    /// Whether a light no ray can find (point, directional, a CGL area
+    /// light without geometry) lights the scene through a mirror or glass
+    /// first: its caustics, physical light that a path tracer (ours, or a
+    /// reference's) cannot sample, since a path needs a ray to find the
+    /// light from a non-specular vertex. On by default; `validate` turns
+    /// it off to compare BDPT with the path tracer on the paths both make.
+    unseen_light_caustics: bool,
     /// Whether light subpaths can go on past their light point: false
     /// with `LightPaths::Specular` in a scene without mirrors or glass.
     specular_objects: bool,
@@ -151,13 +158,19 @@ impl<'a> Bdpt<'a> {
         let power = LightPower::new(&lights.lights, World::of(scene));
         let light_tracing_share = (region.w as f64 * region.h as f64) / (width as f64 * height as f64);
         let sky = (0..lights.lights.len()).filter(|&k| lights.lights[k].is_at_infinity() && lights.lights[k].is_visible()).collect();
-        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All, specular_objects: true })
+        Ok(Bdpt { scene, lights, camera: Sensor::of(camera), max_depth, accumulate, technique, power, width, height, light_tracing_share, sky, light_paths: LightPaths::All, unseen_light_caustics: true, specular_objects: true })
     }
 
     /// The same integrator with `light_paths` for its light subpaths.
     pub fn with_light_paths(self, light_paths: LightPaths) -> Bdpt<'a> {
         let specular_objects = light_paths == LightPaths::All || has_delta_objects(self.scene);
         Bdpt { light_paths, specular_objects, ..self }
+    }
+
+    /// The same integrator with or without the caustics of lights no ray
+    /// finds (see `unseen_light_caustics`).
+    pub fn with_unseen_light_caustics(self, on: bool) -> Bdpt<'a> {
+        Bdpt { unseen_light_caustics: on, ..self }
     }
 
     /// The probability that a pixel sample traces a light subpath (1, or

@@ -115,6 +115,7 @@ impl Bdpt<'_> {
         let draw2 = |slot| sampler.get_2d(dim::light_vertex(0, slot));
         let Some((k, pmf)) = self.power.pick(sampler.get_1d(dim::light_vertex(0, dim::EMIT_PICK))) else { return };
         let light = &self.lights.lights[k];
+        let no_caustics = !self.unseen_light_caustics && !light.is_visible();
         let world = self.power.world();
         let Some(e) = light.sample_emission(self.scene, world, sampler.get_1d(dim::light_vertex(0, dim::EMIT_SELECT)), draw2(dim::EMIT_POINT), draw2(dim::EMIT_DIRECTION)) else { return };
         if light.is_at_infinity() {
@@ -127,7 +128,8 @@ impl Bdpt<'_> {
                 return;
             }
             let ray = Ray::new(e.p, e.dir);
-            self.walk(accel, Walk::start(ray, beta, e.pdf_pos, false), None, Mode::Importance, sampler, path, max, rays, &mut Branches::none());
+            let w = Walk { no_specular_first: no_caustics, ..Walk::start(ray, beta, e.pdf_pos, false) };
+            self.walk(accel, w, None, Mode::Importance, sampler, path, max, rays, &mut Branches::none());
             return;
         }
         let origin_pdf = pmf * e.pdf_pos;
@@ -154,7 +156,8 @@ impl Bdpt<'_> {
         } else {
             y0.it.spawn_ray(e.dir)
         };
-        self.walk(accel, Walk::start(ray, beta, e.pdf_dir, false), None, Mode::Importance, sampler, path, max, rays, &mut Branches::none());
+        let w = Walk { no_specular_first: no_caustics, ..Walk::start(ray, beta, e.pdf_dir, false) };
+        self.walk(accel, w, None, Mode::Importance, sampler, path, max, rays, &mut Branches::none());
     }
 
     /// Extend `path` from its last vertex along `w.ray` (unit direction,
@@ -186,6 +189,12 @@ impl Bdpt<'_> {
             if mode == Mode::Importance && path.len() == 1 && self.light_paths == LightPaths::Specular && !v.bsdf.is_some_and(|b| b.is_delta()) {
                 // Not a caustic path: the light subpath keeps only its light
                 // point (next-event estimation, s = 1, draws its own).
+                return;
+            }
+            if w.no_specular_first && path.len() == 1 && v.bsdf.is_some_and(|b| b.is_delta()) {
+                // Only strategies s >= 2 make a path whose light no ray
+                // finds next to a specular vertex: dropping it takes it
+                // out of the image, and no other path's weight changes.
                 return;
             }
             v.pdf_fwd = v.density_from(w.pdf_dir, prev);
@@ -294,11 +303,14 @@ pub(super) struct Walk {
     beta_start: f32,
     /// Every vertex so far is specular (and this is a camera subpath).
     specular_prefix: bool,
+    /// A light subpath that ends at a mirror or glass as its first bounce
+    /// (from a light no ray finds, with `Bdpt::unseen_light_caustics` off).
+    no_specular_first: bool,
 }
 
 impl Walk {
     fn start(ray: Ray, beta: Vec3, pdf_dir: f32, camera: bool) -> Walk {
-        Walk { ray, beta, pdf_dir, radiance_scale: 1.0, split: 1.0, beta_start: beta.max_element(), specular_prefix: camera }
+        Walk { ray, beta, pdf_dir, radiance_scale: 1.0, split: 1.0, beta_start: beta.max_element(), specular_prefix: camera, no_specular_first: false }
     }
 
     /// `lobe`, followed for sure: its throughput carries its probability.
