@@ -46,6 +46,8 @@ const GRID: (u32, u32) = (4, 3);
 /// (16 rather than 8: Student's quantile at the family's level falls from
 /// about 4.6 to 4.1, which is a fifth fewer samples for the same interval.)
 const REPLICATES: usize = 16;
+/// The fewest a run stops at when its time is up.
+const MIN_REPLICATES: usize = 8;
 /// The family-wise false-alarm rate of a check's tests.
 const ALPHA: f64 = 0.01;
 /// Estimators agree when their regions' means are within this fraction
@@ -148,7 +150,8 @@ fn judge(a: &str, b: &str, ma: &[Vec<[f64; 3]>], mb: &[Vec<[f64; 3]>]) -> Tests 
 /// `a` against `b`, each rendered `REPLICATES` times within `budget`. A
 /// pilot of a tenth of the budget first predicts whether the rest can
 /// decide; an `optional` check (another comparison covers what it tests)
-/// that cannot by far is skipped there, saying what it would need.
+/// that cannot by far is skipped there, saying what it would need, and so
+/// is one the full run leaves undecided (never one that differs).
 pub fn compare_estimators(name: &str, a: &Estimator, b: &Estimator, budget: Duration, optional: bool) -> Check {
     let start = Instant::now();
     let total = budget.as_secs_f64();
@@ -192,16 +195,36 @@ pub fn compare_estimators(name: &str, a: &Estimator, b: &Estimator, budget: Dura
     let ratio = if va > 0.0 && vb > 0.0 { ((va * cost_b) / (vb * cost_a)).sqrt().clamp(0.125, 8.0) } else { 1.0 };
     let k = left(start) / (cost_a * ratio + cost_b);
     let (spp_a, spp_b) = (((k * ratio).floor() as u32).clamp(1, 4096), (k.floor() as u32).clamp(1, 4096));
-    let tests = judge(&a.name, &b.name, &timed(a, 1, spp_a).0, &timed(b, 1001, spp_b).0);
+    // The replicates in pairs; should the pilot's costs prove low, the
+    // pairs stop at the deadline (never below `MIN_REPLICATES`).
+    let (mut ma, mut mb) = (Vec::new(), Vec::new());
+    let main = Instant::now();
+    for k in 0..REPLICATES as u64 {
+        let per_pair = main.elapsed().as_secs_f64() / k.max(1) as f64;
+        if k as usize >= MIN_REPLICATES && left(start) < per_pair {
+            break;
+        }
+        ma.push(region_means(&(a.render)(1 + k, spp_a).image));
+        mb.push(region_means(&(b.render)(1001 + k, spp_b).image));
+    }
+    let tests = judge(&a.name, &b.name, &ma, &mb);
     let seconds = start.elapsed().as_secs_f64();
     let regions = GRID.0 * GRID.1 + 1;
-    let setting = format!("{REPLICATES} renders each, {spp_a} spp of {} and {spp_b} of {}, {regions} regions x 3 channels, tolerance {:.0} %, family-wise alpha {ALPHA}", a.name, b.name, 100.0 * TOLERANCE);
+    let setting = format!("{} renders each, {spp_a} spp of {} and {spp_b} of {}, {regions} regions x 3 channels, tolerance {:.0} %, family-wise alpha {ALPHA}", ma.len(), a.name, b.name, 100.0 * TOLERANCE);
     let (status, summary) = if !tests.differ.is_empty() {
         (Status::Fail, format!("{} of {} tests differ by more than the tolerance ({setting}); first: {}", tests.differ.len(), regions * 3, tests.differ[0]))
     } else if !tests.lit {
         (Status::Unresolved, format!("the image is black: nothing to compare ({setting})"))
     } else if !tests.undecided.is_empty() {
         let more = format!("about {:.0} times the samples would (a --budget about {:.0} times larger)", tests.needs_half.ceil(), (tests.needs_half * seconds / total).max(1.0).ceil());
+        if optional {
+            // The pilot underestimated it; what it tests is covered by the
+            // other comparisons, so it does not hold the verdict.
+            let line = format!("{} of {} tests could not tell within the budget's share ({total:.1} s): {more}; the other comparisons cover what it tests ({setting}); first: {}", tests.undecided.len(), regions * 3, tests.undecided[0]);
+            let mut details: Vec<String> = tests.undecided;
+            details.extend(tests.details);
+            return Check { name: name.into(), status: Status::Skipped, summary: line, details, seconds };
+        }
         (Status::Unresolved, format!("{} of {} tests could not tell, their interval reaching past the tolerance: {more} ({setting}); first: {}", tests.undecided.len(), regions * 3, tests.undecided[0]))
     } else {
         (Status::Pass, format!("agree in every region ({setting}; the widest interval reaches {:.0} % of its tolerance)", 100.0 * tests.widest))
@@ -241,7 +264,13 @@ pub fn run(scene: &Scene, camera: &Camera, env: Option<Arc<EnvMap>>, f: &Flags, 
     };
     let native = accel.accel.as_ref();
     let job = |spec: IntegratorSpec| Job::new(scene.clone(), camera.clone(), env.clone(), f.sampling, spec);
-    let path = estimator("path tracer", job(path_spec)?, f.sampler, None, native);
+    let path_job = job(path_spec)?;
+    if path_job.lights.lights.is_empty() {
+        // Every estimator renders black: nothing to compare, said at once.
+        let why = "the scene has no light (no lamp, no emissive surface, no -e map): every estimator renders it black; give it a light (an unlit scene is meant for -e MAP.exr)";
+        return Ok(vec![Check::new("light transport", Status::Unresolved, why)]);
+    }
+    let path = estimator("path tracer", path_job, f.sampler, None, native);
     let start = Instant::now();
     let specular = has_specular(scene);
     // Light tracing first, on 35 % of the share where it runs (it is often
