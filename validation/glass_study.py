@@ -15,9 +15,16 @@ each seen through a narrow field of view (rays within about 1 degree of the axis
   prism_tir         a tinted 45-degree prism, seen face-on: the ray enters, is totally
                     reflected by the hypotenuse (45 > 43.6 degrees, the critical angle), and
                     leaves through the other face onto an emissive wall at its side:
-                    T^2 (1 - F) / (1 + F), with F at normal incidence
+                    T^2 (1 - F) / (1 + F), with F at normal incidence (the pixels whose ray
+                    meets the hypotenuse past the critical angle by a margin)
+  prism_smooth      the same prism with its vertices shared, so that its shading normals are
+                    interpolated across its edges (as the loader, like CS184, does for every
+                    mesh, CBgems' gems among them): no closed form; each image's mean
+                    against ours
+  gem_smooth        a smooth-shaded octahedron before an emissive wall, the same way
 
-For each scene: the ratio of the image to the closed form over the pixels where the closed form
+(The scenes' faces are flat unless said: no vertex is shared between triangles.) For each
+scene with a closed form: the ratio of the image to the closed form over the pixels where the closed form
 holds, per channel, as mean +- standard error over independent renders, for ours, Mitsuba 3 and
 Cycles (each through the harness's exporter). Run after validation/setup:
 
@@ -64,21 +71,37 @@ def rot_y(deg):
     return lambda p: (c * p[0] + s * p[2], p[1], -s * p[0] + c * p[2])
 
 
+def flat(mesh):
+    """The mesh with no vertex shared between triangles: the loader (as CS184) gives each
+    vertex the area-weighted mean of its triangles' normals, so only unshared vertices keep
+    flat faces."""
+    v, t = mesh
+    return [v[i] for tri in t for i in tri], [(3 * k, 3 * k + 1, 3 * k + 2) for k in range(len(t))]
+
+
 def box(sx, sy, sz, xf=lambda p: p):
-    """A closed box centred at the origin, 12 outward-wound triangles."""
+    """A closed box centred at the origin, 12 outward-wound triangles with flat faces."""
     v = [xf((((i & 1) * 2 - 1) * sx / 2, ((i >> 1 & 1) * 2 - 1) * sy / 2, ((i >> 2 & 1) * 2 - 1) * sz / 2)) for i in range(8)]
     quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
-    return v, [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    return flat((v, [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]))
 
 
-def prism():
+def octahedron(r, centre):
+    """A closed octahedron with shared vertices: smooth shading normals, as a CS184 gem."""
+    c = np.array(centre, float)
+    v = [tuple(c + r * np.array(d, float)) for d in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))]
+    tris = [(0, 2, 4), (2, 1, 4), (1, 3, 4), (3, 0, 4), (2, 0, 5), (1, 2, 5), (3, 1, 5), (0, 3, 5)]
+    return v, tris
+
+
+def prism(shared=False):
     """The right-angle prism: entry face z = 0 (x in [-1, 1]), exit face x = 1, hypotenuse from
-    (1, -2) to (-1, 0) in (x, z); y in [-3, 3]."""
+    (1, -2) to (-1, 0) in (x, z); y in [-3, 3]. Flat faces unless `shared` (smooth normals)."""
     xz = [(-1, 0), (1, 0), (1, -2)]
     v = [(x, y, z) for y in (-3, 3) for (x, z) in xz]
     # 0..2 at y = -3, 3..5 at y = 3
     tris = [(0, 2, 1), (3, 4, 5), (0, 1, 4), (0, 4, 3), (1, 2, 5), (1, 5, 4), (2, 0, 3), (2, 3, 5)]
-    return v, tris
+    return (v, tris) if shared else flat((v, tris))
 
 
 def quad(centre, u, v):
@@ -164,12 +187,24 @@ def scenes():
     def tir(o, d):
         t = -o[2] / d[2]
         x, y = o[0] + t * d[0], o[1] + t * d[1]
-        if abs(x) > 0.7 or abs(y) > 2.0:
+        if abs(x) > 0.95 or abs(y) > 2.0:
+            return None
+        # Only rays totally reflected at the hypotenuse, by a margin: the camera's rays
+        # diverge, and those tilted towards -x meet it below 45 degrees, near the critical
+        # angle.
+        u = np.asarray(d, float) / np.linalg.norm(d)
+        inside = np.array([u[0] / IOR, u[1] / IOR, -math.sqrt(1 - (u[0] ** 2 + u[1] ** 2) / IOR ** 2)])
+        cos_h = abs(np.dot(inside, np.array([-1.0, 0.0, -1.0]) / math.sqrt(2)))
+        if math.sqrt(1 - cos_h * cos_h) < 1 / IOR + 0.01:
             return None
         fr = fresnel(-d[2] / np.linalg.norm(d))
         return [c * c * (1 - fr) / (1 + fr) for c in TINT]
 
     out["prism_tir"] = ([("prism", prism(), glass(TINT)), ("wall", side_wall, EMITTER)], 6.0, tir)
+    # No closed form: shared vertices, so smooth shading normals across sharp edges (as every
+    # CS184 mesh, CBgems' gems among them); the references against ours.
+    out["prism_smooth"] = ([("prism", prism(shared=True), glass(TINT)), ("wall", side_wall, EMITTER)], 6.0, None)
+    out["gem_smooth"] = ([("gem", octahedron(1.0, (0, 0, 0)), glass(TINT)), ("wall", wall, EMITTER)], 30.0, None)
     return out
 
 
@@ -237,43 +272,63 @@ def main():
             cam = json.load(f)["camera"]
         expected = np.zeros((H, W, 3))
         mask = np.zeros((H, W), bool)
-        for (y, x), (o, dd) in camera_rays(cam).items():
-            e = closed(o, dd)
-            if e is not None:
-                expected[y, x] = e
-                mask[y, x] = True
-        if mask.sum() < 50:
-            sys.exit(f"glass_study: {name}: only {mask.sum()} pixels where the closed form holds")
-        found = {}
+        if closed is not None:
+            for (y, x), (o, dd) in camera_rays(cam).items():
+                e = closed(o, dd)
+                if e is not None:
+                    expected[y, x] = e
+                    mask[y, x] = True
+            if mask.sum() < 50:
+                sys.exit(f"glass_study: {name}: only {mask.sum()} pixels where the closed form holds")
+        images = {}
         ours = []
         for k in range(args.renders):
             exr = os.path.join(d, f"ours_{k}.exr")
             sh([args.pathtracer, dae, *view, "-s", str(args.spp), "-m", str(DEPTH), "--seed", str(11 + k), "-f", os.path.join(d, f"ours_{k}.png"), "--exr", exr])
             ours.append(read_exr(exr))
-        found["ours"] = window_ratio(*stack(ours), expected, mask)
+        images["ours"] = stack(ours)
         if "mitsuba" in refs:
             prefix = os.path.join(d, "mitsuba")
             r = subprocess.run([sys.executable, os.path.join(HERE, "mitsuba_ref.py"), os.path.join(d, "scene"), "--max-depth", str(DEPTH), "--spp", str(args.spp),
                                 "--renders", str(args.renders), "--out", prefix], capture_output=True, text=True)
             if r.returncode != 0:
-                found["mitsuba"] = [l for l in r.stderr.splitlines() if l.strip()][-1]
+                images["mitsuba"] = [l for l in r.stderr.splitlines() if l.strip()][-1]
             else:
-                found["mitsuba"] = window_ratio(read_exr(prefix + ".exr"), read_exr(prefix + "_var.exr"), expected, mask)
+                images["mitsuba"] = (read_exr(prefix + ".exr"), read_exr(prefix + "_var.exr"))
         if "cycles" in refs and blender:
             prefix = os.path.join(d, "cycles")
             r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--", os.path.join(d, "scene"),
                                 "--mode", "radiance", "--max-depth", str(DEPTH), "--spp", str(args.spp), "--renders", str(args.renders), "--out", prefix], capture_output=True, text=True)
             if r.returncode != 0:
-                found["cycles"] = [l for l in r.stderr.splitlines() if l.strip()][-1]
+                images["cycles"] = [l for l in r.stderr.splitlines() if l.strip()][-1]
             else:
                 with open(prefix + "_cycles.json") as f:
                     meta = json.load(f)
-                found["cycles"] = window_ratio(*stack([read_exr(p["file"]) for p in meta["renders"]]), expected, mask)
-        exp_mean = expected[mask].mean(axis=0)
-        rows.append((name, int(mask.sum()), exp_mean, found))
-    print(f"Image / closed form over the pixels where it holds, per channel (R, G, B): mean +- standard error of {args.renders} renders of {args.spp} spp, -m {DEPTH}, {W}x{H}.\n")
+                images["cycles"] = stack([read_exr(p["file"]) for p in meta["renders"]])
+        found = {}
+        if closed is not None:
+            for r, v in images.items():
+                found[r] = v if isinstance(v, str) else window_ratio(*v, expected, mask)
+            rows.append((name, int(mask.sum()), "closed form " + ", ".join(f"{c:.4f}" for c in expected[mask].mean(axis=0)), found))
+        else:
+            # The whole image's mean against ours (pixels independent: box filter).
+            def whole(v):
+                m, var = v
+                return m.reshape(-1, 3).mean(axis=0), np.sqrt(var.reshape(-1, 3).sum(axis=0)) / (H * W)
+            mo, so = whole(images["ours"])
+            for r, v in images.items():
+                if isinstance(v, str):
+                    found[r] = v
+                elif r == "ours":
+                    found[r] = (np.ones(3), so / mo)
+                else:
+                    m, se = whole(v)
+                    q = m / mo
+                    found[r] = (q, q * np.sqrt((se / m) ** 2 + (so / mo) ** 2))
+            rows.append((name, H * W, "ours' mean " + ", ".join(f"{c:.4f}" for c in mo), found))
+    print(f"Image / closed form over the pixels where it holds (where there is none: the whole image's mean / ours'), per channel (R, G, B): mean +- standard error of {args.renders} renders of {args.spp} spp, -m {DEPTH}, {W}x{H}.\n")
     names = ["ours"] + [r for r in refs if r in ("mitsuba", "cycles")]
-    print("| scene | pixels | closed form (R, G) | " + " | ".join(names) + " |")
+    print("| scene | pixels | against | " + " | ".join(names) + " |")
     print("|---|---|---|" + "---|" * len(names))
     for name, n, e, found in rows:
         cells = []
@@ -286,7 +341,7 @@ def main():
             else:
                 m, se = v
                 cells.append(", ".join(f"{m[c]:.4f} ± {se[c]:.4f}" for c in range(3)))
-        print(f"| {name} | {n} | {e[0]:.4f}, {e[1]:.4f} | " + " | ".join(cells) + " |")
+        print(f"| {name} | {n} | {e} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

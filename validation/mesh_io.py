@@ -45,6 +45,21 @@ def norm(a):
     return math.sqrt(dot(a, a))
 
 
+def smooth_faces(verts, normals, faces, tol=1e-4):
+    """How many faces have a vertex whose shading normal is not the face's own (by more than
+    `tol` in the cosine): faces shaded as part of a curved surface."""
+    count = 0
+    for f in faces:
+        a, b, c = (verts[i] for i in f[:3])
+        n = cross(sub(b, a), sub(c, a))
+        ln = norm(n)
+        if ln == 0:
+            continue
+        if any(dot(n, normals[i]) / (ln * max(norm(normals[i]), 1e-30)) < 1 - tol for i in f):
+            count += 1
+    return count
+
+
 def rectangle_of(verts, faces):
     """(corner, u, v, unit winding normal) of a mesh that is one rectangle of two triangles
     facing the same way, else None."""
