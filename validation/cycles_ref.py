@@ -76,6 +76,7 @@ def parse_args(argv):
     ap.add_argument("--ladder", default="", help="also time single renders at these spp")
     ap.add_argument("--ladder-seeds", type=int, default=1, help="independent renders per ladder rung")
     ap.add_argument("--threads", type=int, default=0, help="0: all cores")
+    ap.add_argument("--smooth-glass", action="store_true", help="render smooth-shaded glass instead of refusing it (glass_study.py measures it)")
     ap.add_argument("--out", required=True, help="prefix: <out>_r<k>.exr, <out>_spp<N>.exr, <out>_cycles.json")
     return ap.parse_args(argv)
 
@@ -303,7 +304,7 @@ def add_area_lamp(name, corner, u, v, n, radiance, cam_visible):
     bpy.context.scene.collection.objects.link(ob)
 
 
-def build(spec, folder, mode):
+def build(spec, folder, mode, smooth_glass=False):
     scene = bpy.context.scene
     for ob in list(bpy.data.objects):
         bpy.data.objects.remove(ob, do_unlink=True)
@@ -333,7 +334,7 @@ def build(spec, folder, mode):
             mat = diffuse_material(name, s["albedo"])
         elif not emissive:
             b = s.get("bsdf", {"type": "diffuse"})
-            if b["type"] in ("glass", "refraction") and s["type"] == "mesh" and (k := smooth_faces(verts, normals, faces)):
+            if b["type"] in ("glass", "refraction") and s["type"] == "mesh" and not smooth_glass and (k := smooth_faces(verts, normals, faces)):
                 # Measured (validation/glass_study.py): flat glass agrees with the closed form
                 # and with Mitsuba 3 to 0.06 %; a prism whose normals are interpolated across
                 # its edges renders 3.6-4.7 % brighter in Cycles 3.4 than ours and Mitsuba's.
@@ -521,7 +522,7 @@ def main():
     args = parse_args(argv)
     with open(os.path.join(args.scene, "scene.json")) as f:
         spec = json.load(f)
-    w, h = build(spec, args.scene, args.mode)
+    w, h = build(spec, args.scene, args.mode, args.smooth_glass)
     configure(w, h, args.mode, args.max_depth, args.threads)
     meta = {"renderer": f"cycles (blender {bpy.app.version_string})", "mode": args.mode, "spp_per_render": args.spp, "renders": [], "ladder": []}
     # The first render in a Blender process pays one-time costs (kernel and image set-up): one

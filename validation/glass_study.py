@@ -26,7 +26,8 @@ each seen through a narrow field of view (rays within about 1 degree of the axis
 (The scenes' faces are flat unless said: no vertex is shared between triangles.) For each
 scene with a closed form: the ratio of the image to the closed form over the pixels where the closed form
 holds, per channel, as mean +- standard error over independent renders, for ours, Mitsuba 3 and
-Cycles (each through the harness's exporter). Run after validation/setup:
+Cycles (each through the harness's exporter; Cycles with --smooth-glass, which renders the
+smooth-shaded glass its exporter otherwise refuses). Run after validation/setup:
 
   validation/.venv/bin/python validation/glass_study.py [--spp 256] [--renders 4] [--out DIR]
 """
@@ -298,7 +299,7 @@ def main():
         if "cycles" in refs and blender:
             prefix = os.path.join(d, "cycles")
             r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--", os.path.join(d, "scene"),
-                                "--mode", "radiance", "--max-depth", str(DEPTH), "--spp", str(args.spp), "--renders", str(args.renders), "--out", prefix], capture_output=True, text=True)
+                                "--mode", "radiance", "--smooth-glass", "--max-depth", str(DEPTH), "--spp", str(args.spp), "--renders", str(args.renders), "--out", prefix], capture_output=True, text=True)
             if r.returncode != 0:
                 images["cycles"] = [l for l in r.stderr.splitlines() if l.strip()][-1]
             else:
