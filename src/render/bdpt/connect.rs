@@ -57,7 +57,9 @@ impl Bdpt<'_> {
             return done(z.beta * emitted(self.scene, &z.it, z.wo), None, None, None);
         }
         if t == 1 {
-            let y = &light[s - 1];
+            // An emission sample can fail (a direction of zero density on an
+            // environment map): the light subpath is then empty.
+            let y = light.get(s - 1)?;
             if !y.connectible() {
                 return None;
             }
