@@ -94,7 +94,11 @@ pub fn run(scene: &Path, a: &RenderArgs, asked: &[String], budget: Duration, rep
     let summary = std::fs::read_to_string(out.join("summary.json")).ok().and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
     let Some(summary) = summary else {
         let why = match status {
-            Ok(o) => String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("no summary written").to_string(),
+            Ok(o) => {
+                let err = String::from_utf8_lossy(&o.stderr);
+                let last = err.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no message").trim().to_string();
+                format!("{last} ({}, no summary written)", o.status)
+            }
             Err(e) => format!("cannot run the harness: {e}"),
         };
         checks.extend(run_refs.iter().map(|r| Check { seconds, ..Check::new(format!("reference: {r}"), Status::Unresolved, format!("the harness stopped: {why}")) }));
