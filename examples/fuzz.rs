@@ -467,7 +467,7 @@ mod corpus {
                 a.extend(args.iter().map(|s| s.to_string()));
                 a.extend(["-t".into(), "1".into(), "--part".into(), format!("{i}/2"), "--partial".into(), file.to_string_lossy().into_owned()]);
                 let cli = pathtracer::app::cli::parse(&a)?.expect("render arguments");
-                pathtracer::app::cli::run(cli)?;
+                pathtracer::app::run(cli)?;
             }
         }
         Ok(())

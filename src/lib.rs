@@ -27,7 +27,7 @@
 //! Those modules are the library: they know nothing of the command line, the
 //! benchmark or the environment, and take every option as a value. [`app`]
 //! is the application built on them: [`app::cli::parse`] and
-//! [`app::cli::run`] are the command line the binary runs, with every flag
+//! [`app::run`] are the command line the binary runs, with every flag
 //! checked; the benchmark, split renders' merge, the export for the
 //! reference renderers and the fuzzer live beside it. The documentation in
 //! `docs/` describes each piece (`docs/design/modules.md` is the module map).

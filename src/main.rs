@@ -1,3 +1,3 @@
 fn main() -> std::process::ExitCode {
-    pathtracer::app::cli::main()
+    pathtracer::app::main()
 }

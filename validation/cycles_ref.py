@@ -437,7 +437,7 @@ def build(spec, folder, mode, smooth_glass=False):
     cd.sensor_fit = "HORIZONTAL"
     cd.angle = math.radians(cam["fov_x_deg"])
     cd.clip_start = max(cam["near"], 1e-6)
-    cd.clip_end = min(cam["far"], 1e10)
+    cd.clip_end = min(float("inf") if cam["far"] is None else cam["far"], 1e10)  # null: no far plane
     if cam.get("lens_radius", 0) > 0:
         cd.dof.use_dof = True
         cd.dof.focus_distance = cam["focal_distance"]

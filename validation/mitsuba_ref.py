@@ -132,7 +132,7 @@ def scene_dict(spec, folder, max_depth, integrator="path"):
             "fov": cam["fov_x_deg"],
             "fov_axis": "x",
             "near_clip": max(cam["near"], 1e-4),
-            "far_clip": min(cam["far"], 1e7),
+            "far_clip": min(float("inf") if cam["far"] is None else cam["far"], 1e7),  # null: no far plane
             "to_world": mi.ScalarTransform4f().look_at(origin=origin, target=target, up=cam["up"]),
             "sampler": {"type": "independent"},
             "film": {

@@ -82,7 +82,8 @@ def normalise_export(src, dst):
 
     spec["camera"]["origin"] = mv(spec["camera"]["origin"])
     spec["camera"]["near"] *= scale
-    spec["camera"]["far"] *= scale
+    if spec["camera"]["far"] is not None:  # null: no far plane
+        spec["camera"]["far"] *= scale
     spec["normalised"] = {"shift": shift.tolist(), "scale": scale}
     for s in spec["shapes"]:
         if s["type"] == "sphere":

@@ -107,5 +107,19 @@ pub fn compare_occlusion(scene: &Scene, r: &Ray, hit: Option<Hit>, a: &dyn Trave
     }
     let s = Ray { tmax: h.t - margin, ..*r };
     let (oa, ob) = (a.occluded(&s), b.occluded(&s));
-    (oa != ob).then(|| format!("shortened to {}: occluded {oa} against {ob}", s.tmax))
+    if oa == ob {
+        return None;
+    }
+    // The occluder one backend found on the segment may be another
+    // triangle at the closest hit's distance within f32 (a ray grazing
+    // nearly coplanar neighbours along an edge): the tie rule of `compare`,
+    // with both triangles' bounds.
+    let o = if oa { a.intersect(&s) } else { b.intersect(&s) };
+    if let Some(o) = o {
+        let bound = error_bounds(scene, r, &o).1.max(error_bounds(scene, r, &h).1) / grazing(scene, r, &o).min(grazing(scene, r, &h));
+        if h.t - o.t <= bound {
+            return None;
+        }
+    }
+    Some(format!("shortened to {}: occluded {oa} against {ob} (the occluder: {o:?}; the closest hit: {h:?})", s.tmax))
 }

@@ -101,7 +101,7 @@ pub enum Command {
     /// sampling against fixed-rate sampling, and the reference renderers;
     /// one verdict line per check, exit status 0 (all pass), 1 (a check
     /// failed) or 2 (could not decide or run).
-    Validate(crate::app::validate::ValidateArgs),
+    Validate(ValidateArgs),
     /// Check partials on their own (header and records checksums): one line
     /// per partial, a non-zero exit when any is damaged.
     Verify {
@@ -353,4 +353,23 @@ pub enum SplitArg {
     /// Tiles k of the frame with k mod N = I (pixels are independent, so
     /// adaptive sampling stays exact)
     Tiles,
+}
+
+/// `pathtracer validate`: the scene, the render flags it is checked with,
+/// and the checks' budget, references and report.
+#[derive(clap::Args, Debug)]
+pub struct ValidateArgs {
+    #[command(flatten)]
+    pub render: RenderArgs,
+    /// Wall time for all checks together, e.g. 90s, 5m, 1h [default: 2m];
+    /// shared among them, each scaling its rays and samples to its share
+    #[arg(long, value_name = "TIME")]
+    pub budget: Option<String>,
+    /// Reference renderers to compare against, comma-separated (mitsuba,
+    /// cycles, povray), or none [default: every one installed]
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    pub references: Vec<String>,
+    /// Write summary.json, junit.xml and report.html into DIR
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
 }

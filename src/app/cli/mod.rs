@@ -8,7 +8,7 @@ pub(crate) mod flags;
 pub(crate) mod render;
 mod usage;
 
-pub use args::{BdptLightPaths, Cli, Command, EnvSamplingArg, IntegratorKind, LightPickArg, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg};
+pub use args::{BdptLightPaths, Cli, Command, EnvSamplingArg, IntegratorKind, LightPickArg, LightSamplingArg, RenderArgs, SamplerArg, SkySamplingArg, SplitArg, ValidateArgs};
 
 pub use render::{init_threads, load_scene};
 
@@ -17,36 +17,12 @@ use crate::image_io;
 use crate::light::Lights;
 use render::run_render;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use usage::{not_a_command, usage_error};
 
 const DEMO_SPP: u32 = 16;
 const DEMO_DEPTH: u32 = 5;
 
-/// Entry point for the binary: one line on error, non-zero exit, no panic.
-pub fn main() -> ExitCode {
-    // Die quietly on a closed pipe (`pathtracer ... | head`), as Unix tools do,
-    // instead of panicking in println!.
-    #[cfg(unix)]
-    // SAFETY: restoring the default disposition of one signal before any thread starts.
-    unsafe {
-        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
-    }
-    match parse(std::env::args_os()) {
-        Ok(Some(cli)) => match run(cli) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(e) => {
-                eprintln!("pathtracer: error: {e}");
-                ExitCode::from(if e.is_usage() { 2 } else { 1 })
-            }
-        },
-        Ok(None) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("pathtracer: error: {e}");
-            ExitCode::from(2)
-        }
-    }
-}
+
 
 /// "0.1.0 (commit 1a2b3c4d5e6f)": the version and the commit the binary was
 /// built from ("+ changes" where its sources differed from the commit).
@@ -82,11 +58,14 @@ where
     }
 }
 
-/// Run a parsed command line, as the binary does.
+/// Run a parsed command line, every command but `validate` (which
+/// `app::run`, the binary's, runs too).
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Some(Command::Bench(b)) => crate::app::bench::run(&b),
-        Some(Command::Validate(v)) => crate::app::validate::run(&v),
+        // `validate` is built on this module (its render flags): `app::run`
+        // runs it, one level up.
+        Some(Command::Validate(_)) => Err(Error::new("pathtracer validate runs through pathtracer::app::run")),
         Some(Command::Compare { reference, images }) => compare(&reference, &images),
         Some(Command::Merge { partials, output, exr, variance_exr }) => {
             crate::app::merge::run(&partials, &output, exr.as_deref(), variance_exr.as_deref())

@@ -160,7 +160,7 @@ impl Workspace {
         }
         args.extend(["-f".into(), img]);
         let live = super::alloc::mark();
-        let result = std::panic::catch_unwind(|| crate::app::cli::parse(&args).and_then(|c| c.map_or(Ok(()), crate::app::cli::run)));
+        let result = std::panic::catch_unwind(|| crate::app::cli::parse(&args).and_then(|c| c.map_or(Ok(()), crate::app::run)));
         let held = super::alloc::peak() - live;
         let left: Vec<String> = Self::entries(&self.dir).into_iter().filter(|n| *n != case_name && n != "out").collect();
         let written = Self::entries(&out);

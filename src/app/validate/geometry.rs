@@ -112,7 +112,7 @@ fn hard_rays(scene: &Scene, n: usize, seed: u64) -> (Vec<Ray>, Vec<Ray>) {
 /// `other` against `reference` on every ray of `rays`: one check.
 /// `cracks`: brute force, where `other` is Embree, whose robust mode has
 /// known cracks at vertices (a ray through a vertex can pass between the
-/// triangles around it; RenderKit/embree issues 174, 181, 381): a ray
+/// triangles around it; RenderKit/embree#174, #181, #381): a ray
 /// through a vertex that `other` passes while brute force and `reference`
 /// hit there is counted apart, and named, rather than failed.
 pub fn compare_backends(name: &str, scene: &Scene, reference: &dyn Traversal, other: &dyn Traversal, rays: &[(&str, Vec<Ray>)], cracks: Option<&dyn Traversal>) -> Check {

@@ -36,32 +36,13 @@ mod transport;
 
 use super::cli::flags::check_flags;
 use super::cli::render::{load_environment, load_scene, setup_camera};
-use super::cli::RenderArgs;
+use super::cli::ValidateArgs;
 use crate::error::{Error, Result};
-use clap::Args;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 pub use geometry::{compare_backends, ray_sets};
 pub use report::junit;
 pub use transport::{compare_estimators, estimator, Estimator};
-
-#[derive(Args, Debug)]
-pub struct ValidateArgs {
-    #[command(flatten)]
-    pub render: RenderArgs,
-    /// Wall time for all checks together, e.g. 90s, 5m, 1h [default: 2m];
-    /// shared among them, each scaling its rays and samples to its share
-    #[arg(long, value_name = "TIME")]
-    pub budget: Option<String>,
-    /// Reference renderers to compare against, comma-separated (mitsuba,
-    /// cycles, povray), or none [default: every one installed]
-    #[arg(long, value_name = "LIST", value_delimiter = ',')]
-    pub references: Vec<String>,
-    /// Write summary.json, junit.xml and report.html into DIR
-    #[arg(long, value_name = "DIR")]
-    pub report: Option<PathBuf>,
-}
 
 /// What a check concluded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
