@@ -49,6 +49,7 @@ fn compare(scene: &Scene, i: usize, r: &Ray, n: Option<Hit>, e: Option<Hit>, occ
         Agreement::Tie => (true, false, None),
         Agreement::Widened => (false, true, None),
         Agreement::Crack => (false, false, Some(format!("ray {i} {r:?}: a vertex crack"))),
+        Agreement::OpenEdge => (false, false, Some(format!("ray {i} {r:?}: at an open edge"))),
         Agreement::Differ(why) => (false, false, Some(format!("ray {i} {r:?}: native against embree: {why}"))),
     };
     let err = err.or_else(|| (occ_n != occ_e).then(|| format!("ray {i} {r:?}: occluded native {occ_n} embree {occ_e}")));

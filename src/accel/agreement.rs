@@ -30,6 +30,10 @@ pub enum Agreement {
     /// vertex (set by a caller that knows the ray's aim and asked brute
     /// force; `compare` never returns it).
     Crack,
+    /// A hit within f32 of an edge of an open surface (no other triangle
+    /// shares the edge) against a pass: either answer is right (set by a
+    /// caller, as `Crack`).
+    OpenEdge,
     /// Different answers: why, in words.
     Differ(String),
 }
@@ -67,6 +71,25 @@ fn grazing(scene: &Scene, r: &Ray, h: &Hit) -> f32 {
         }
         _ => 1.0,
     }
+}
+
+/// Whether hit `h` lies within its f32 bound of an edge of `h`'s triangle
+/// that no other triangle of the mesh shares (none with both ends and a
+/// third corner of its own: a flipped copy of the triangle does not count),
+/// where a ray may pass or hit by rounding alone.
+pub fn on_open_edge(scene: &Scene, r: &Ray, h: &Hit) -> bool {
+    let Shape::Mesh(m) = &scene.shapes[h.geom_id as usize] else { return false };
+    let corners = |t: &[u32; 3]| t.map(|i| m.positions[i as usize]);
+    let [a, b, c] = corners(&m.triangles[h.prim_id as usize]);
+    let bound = error_bounds(scene, r, h).0.max(REL);
+    // Each edge with the barycentric that vanishes on it.
+    let edges = [((a, c), b, h.u), ((a, b), c, h.v), ((b, c), a, 1.0 - h.u - h.v)];
+    edges.iter().filter(|e| e.2.abs() <= bound).any(|&((p, q), own, _)| {
+        !m.triangles.iter().enumerate().any(|(k, t)| {
+            let t = corners(t);
+            k != h.prim_id as usize && t.contains(&p) && t.contains(&q) && t.iter().any(|x| *x != p && *x != q && *x != own)
+        })
+    })
 }
 
 /// Compare two closest hits of ray `r`.
@@ -122,4 +145,45 @@ pub fn compare_occlusion(scene: &Scene, r: &Ray, hit: Option<Hit>, a: &dyn Trave
         }
     }
     Some(format!("shortened to {}: occluded {oa} against {ob} (the occluder: {o:?}; the closest hit: {h:?})", s.tmax))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{generated::sphere_scene, TriangleMesh};
+    use glam::Vec3;
+
+    /// A scene of one mesh: the unit square's two triangles, and what else.
+    fn square(extra: Vec<[u32; 3]>) -> Scene {
+        let mut s = sphere_scene(10);
+        let positions = vec![Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+        let mut triangles = vec![[0, 1, 2], [0, 2, 3]];
+        triangles.extend(extra);
+        s.shapes = vec![Shape::Mesh(TriangleMesh { positions, triangles, normals: Vec::new() })];
+        s
+    }
+
+    #[test]
+    fn an_edge_is_open_only_where_no_other_triangle_shares_it() {
+        let down = Vec3::new(0.0, 0.0, -1.0);
+        let at = |prim: u32, u: f32, v: f32| Hit { t: 1.0, u, v, geom_id: 0, prim_id: prim };
+        let scene = square(Vec::new());
+        // Triangle 0 (a, b, c) = (0, 1, 2): its edge a-c (u = 0) is the diagonal, shared with triangle 1.
+        let r = Ray::new(Vec3::new(0.5, 0.5, 1.0), down);
+        assert!(!on_open_edge(&scene, &r, &at(0, 0.0, 0.5)));
+        // Its edge a-b (v = 0) is the square's border: open.
+        let r = Ray::new(Vec3::new(0.5, 0.0, 1.0), down);
+        assert!(on_open_edge(&scene, &r, &at(0, 0.5, 0.0)));
+        // Inside the triangle, no edge at all.
+        assert!(!on_open_edge(&scene, &r, &at(0, 0.3, 0.2)));
+        // A flipped copy of triangle 0 does not close its border; a triangle with a corner of its own does.
+        let flipped = square(vec![[0, 2, 1]]);
+        assert!(on_open_edge(&flipped, &r, &at(0, 0.5, 0.0)));
+        let mut closed = square(Vec::new());
+        if let Shape::Mesh(m) = &mut closed.shapes[0] {
+            m.positions.push(Vec3::new(0.5, -1.0, 0.0));
+            m.triangles.push([1, 0, 4]);
+        }
+        assert!(!on_open_edge(&closed, &r, &at(0, 0.5, 0.0)));
+    }
 }
