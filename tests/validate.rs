@@ -122,7 +122,7 @@ fn validate_passes_on_a_shipped_scene_and_writes_well_formed_junit() {
     let dir = std::env::temp_dir().join(format!("pt-validate-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let out = Command::new(env!("CARGO_BIN_EXE_pathtracer"))
-        .args(["validate", "scenes/cs184/sky/CBempty.dae", "-m", "3", "--budget", "90s", "--references", "none", "--report"])
+        .args(["validate", "scenes/cs184/sky/CBempty.dae", "-m", "2", "--budget", "90s", "--references", "none", "--report"])
         .arg(&dir)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .env("CI", "true")
