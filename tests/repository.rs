@@ -77,7 +77,7 @@ fn the_diary_check_catches_what_it_should_and_nothing_else() {
         format!("measured in {s} 32"),
         format!("re-run this {s}"),
         format!("as {} 14's item 3 asks", "issue"),
-        format!("on the {} Xeon", "lent"),
+        format!("on the {}{} Xeon", "len", "t"),
         format!("a {} machine", "borrowed"),
         format!("the {} machine's 16 cores", "device"),
         format!("the {}'s goal", "issue"),
