@@ -71,6 +71,13 @@ pub trait Traversal: Send + Sync {
         None
     }
 
+    /// The traversal choices the build fixed (instruction set, the way
+    /// batches go, the any-hit child order), in words; `None` where the
+    /// backend makes none of its own.
+    fn choices(&self) -> Option<String> {
+        None
+    }
+
     /// The closest hit in range, or `None`.
     fn intersect(&self, ray: &Ray) -> Option<Hit>;
 

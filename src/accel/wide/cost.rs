@@ -22,10 +22,10 @@ impl<const W: usize> WideBvh<W> {
     /// sphere) tests for a ray through the root's box, traversal and
     /// intersection costs both 1.
     pub(super) fn sah(&self) -> SahCost {
-        if self.root == EMPTY {
+        if self.tree.root == EMPTY {
             return SahCost::default();
         }
-        self.sah_cost(self.root, self.root_area)
+        self.sah_cost(self.tree.root, self.tree.root_area)
     }
 
     /// Surface-area-weighted cost of the subtree `code` (whose box has half
@@ -48,7 +48,7 @@ impl<const W: usize> WideBvh<W> {
 
     /// The children of node `code`: (child code, half area of its box).
     pub(super) fn child_areas(&self, code: u32) -> impl Iterator<Item = (u32, f64)> + '_ {
-        let n = &self.nodes[code as usize];
+        let n = &self.tree.nodes[code as usize];
         (0..W).filter(move |&lane| n.child[lane] != EMPTY).map(move |lane| {
             let e = [0, 1, 2].map(|a| (n.bounds[3 + a][lane] - n.bounds[a][lane]).max(0.0) as f64);
             (n.child[lane], e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
@@ -74,17 +74,17 @@ impl<const W: usize> WideBvh<W> {
     /// build and 29 ms of sphere 5M's 830 (and sorting every item, 35-60).
     pub(super) fn cold_lines(&self, hot: usize) -> (f64, f64) {
         const DESCENTS: usize = 2048;
-        if self.root == EMPTY || self.root & LEAF_BIT != 0 {
+        if self.tree.root == EMPTY || self.tree.root & LEAF_BIT != 0 {
             return (0.0, 0.0);
         }
-        let root = self.root_area.max(f64::MIN_POSITIVE);
+        let root = self.tree.root_area.max(f64::MIN_POSITIVE);
         // A node's children: (code, probability).
         let children = |code: u32| self.child_areas(code).map(move |(c, area)| (c, area / root));
         // Best first: the probability of the `hot`-th most likely item.
         // Heap entries pack the probability (as f32, whose bits order as
         // the non-negative values do) above the child code.
         let key = |p: f64, code: u32| ((p as f32).to_bits() as u64) << 32 | code as u64;
-        let mut heap = std::collections::BinaryHeap::from([key(1.0, self.root)]);
+        let mut heap = std::collections::BinaryHeap::from([key(1.0, self.tree.root)]);
         let mut p_hot = f64::INFINITY;
         for _ in 0..hot {
             let Some(top) = heap.pop() else {
@@ -102,7 +102,7 @@ impl<const W: usize> WideBvh<W> {
         let mut rng = crate::rng::Rng::new(0xC01D, 0);
         let (mut total, mut squares) = (0.0, 0.0);
         for _ in 0..DESCENTS {
-            let (mut code, mut weight, mut p, mut path) = (self.root, 1.0f64, 1.0f64, 0.0);
+            let (mut code, mut weight, mut p, mut path) = (self.tree.root, 1.0f64, 1.0f64, 0.0);
             loop {
                 if (p as f32 as f64) < p_hot {
                     path += weight * self.cache_lines(code) as f64;

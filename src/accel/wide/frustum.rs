@@ -29,7 +29,8 @@
 
 use super::occluders::OccluderCache;
 use super::packet::{RaysSoA, PACKET};
-use super::{Shear, WideBvh, EMPTY, LEAF_BIT, STACK};
+use super::stack::WalkStack;
+use super::{Shear, WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::bvh::ROBUST_SCALE;
 use crate::accel::prims::closer;
 use crate::accel::Hit;
@@ -168,7 +169,7 @@ impl<const W: usize> WideBvh<W> {
     /// `closest_coherent_avx` with the AVX-512 packet kernels.
     ///
     /// # Safety
-    /// The CPU must have AVX2 and AVX-512F (`self.avx512`); `W` must be 8.
+    /// The CPU must have AVX2 and AVX-512F (`self.policy.avx512()`); `W` must be 8.
     #[target_feature(enable = "avx2,avx512f")]
     pub(super) unsafe fn closest_coherent_avx512(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         self.closest_packets::<true>(rays, hits)
@@ -186,7 +187,7 @@ impl<const W: usize> WideBvh<W> {
     /// `hits[i]` = the closest hit of `rays[i]`, packets of `PACKET` rays.
     ///
     /// # Safety
-    /// The CPU must have AVX2 (`self.avx`); `W` must be 8.
+    /// The CPU must have AVX2 (`self.policy.avx()`); `W` must be 8.
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_coherent_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         self.closest_packets::<false>(rays, hits)
@@ -208,7 +209,7 @@ impl<const W: usize> WideBvh<W> {
     unsafe fn closest_packets<const WIDE: bool>(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         let mut unused = [false; PACKET];
         for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            if self.root & LEAF_BIT != 0 || r.len() < 2 {
+            if self.tree.root & LEAF_BIT != 0 || r.len() < 2 {
                 self.closest_all::<true>(r, h);
                 continue;
             }
@@ -224,8 +225,8 @@ impl<const W: usize> WideBvh<W> {
     /// shadow rays (`stream_shadows`), in streams.
     #[inline(always)]
     unsafe fn any_packets<const WIDE: bool>(&self, rays: &[Ray], out: &mut [bool]) {
-        let order = self.any_order::<true>(rays);
-        if self.stream_shadows {
+        let order = self.policy.any_order;
+        if self.policy.shadows == super::policy::ShadowBatches::Streams {
             return self.any_streams(rays, out, order);
         }
         self.any_packet_way::<WIDE>(rays, out, order)
@@ -238,7 +239,7 @@ impl<const W: usize> WideBvh<W> {
         let mut unused = [None; PACKET];
         let mut cache = OccluderCache::default();
         for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
-            if self.root & LEAF_BIT != 0 || r.len() < 2 {
+            if self.tree.root & LEAF_BIT != 0 || r.len() < 2 {
                 self.any_all_ordered::<true>(r, o, order);
                 continue;
             }
@@ -284,11 +285,9 @@ impl<const W: usize> WideBvh<W> {
         }
         let mut active: u64 = (1u64 << n) - 1;
         let mut far = tmax[..n].iter().fold(f32::NEG_INFINITY, |m, &t| m.max(t));
-        // A cache-aligned frame (`CacheAligned`).
-        let mut stack = super::CacheAligned([MaybeUninit::<(u32, f32)>::uninit(); STACK]);
-        let stack = &mut stack.0;
+        let mut stack = WalkStack::<()>::new();
         let mut sp = 0;
-        let mut cur = self.root;
+        let mut cur = self.tree.root;
         let (mut wasted, mut useful) = (0u32, 0u32);
         // Occlusion with one axis permutation for all rays: leaves test 8
         // rays against one triangle from the packet's own set-up.
@@ -318,7 +317,7 @@ impl<const W: usize> WideBvh<W> {
             }
             // `cur` is always an interior node: leaves are intersected from
             // their parent, ray by ray.
-            let node = &self.nodes[cur as usize];
+            let node = &self.tree.nodes[cur as usize];
             let mut near = [0.0f32; W];
             let mask = f.test::<W>(node, far, &mut near);
             let mut leaves = 0u32;
@@ -436,13 +435,13 @@ impl<const W: usize> WideBvh<W> {
             let inner = mask & !leaves;
             if inner != 0 {
                 // `order`: nearest first for the closest hit, the batch's
-                // choice for any hit (`any_order`); a packet stops only
+                // tree's choice for any hit (`Policy::any_order`); a packet stops only
                 // once every ray is occluded.
-                sp = self.push_children(node, inner, &near, stack, sp, order);
+                self.push_entered(&mut stack, &mut sp, node, inner, &near, order);
             }
             // Pop the nearest child that may still hold a closer hit (the
             // leaves just tested may have shortened the rays).
-            match super::pop_within(stack, &mut sp, far) {
+            match stack.pop_within(&mut sp, far) {
                 Some(code) => cur = code,
                 None => return,
             }

@@ -18,7 +18,8 @@
 use super::kernels::{slab_planes, Slab};
 use super::stream::STREAM;
 use super::triangle::Shear;
-use super::{WideBvh, EMPTY, LEAF_BIT, STACK};
+use super::stack::WalkStack;
+use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::prims::closer;
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
@@ -63,7 +64,7 @@ impl<const W: usize> WideBvh<W> {
             }
             prev = Some(r.origin);
         }
-        steps as usize >= STREAM_MIN_RAYS && sum < steps as f32 * COHERENT_STEP * self.root_diagonal
+        steps as usize >= STREAM_MIN_RAYS && sum < steps as f32 * COHERENT_STEP * self.tree.root_diagonal
     }
 
     /// `hits[i]` = the closest hit of `rays[i]`, in streams of up to
@@ -75,7 +76,7 @@ impl<const W: usize> WideBvh<W> {
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_streams(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         debug_assert!(W == 8);
-        if self.root & LEAF_BIT != 0 || self.root == EMPTY {
+        if self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
             return self.closest_all::<true>(rays, hits);
         }
         let mut waiting = [[0u32; STREAM]; 8];
@@ -126,13 +127,12 @@ impl<const W: usize> WideBvh<W> {
         let mut setup: u64 = 0;
         let mut rts: [MaybeUninit<RayTransform>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
         let mut shears: [MaybeUninit<Shear>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
-        let mut stack = super::CacheAligned([MaybeUninit::<(u32, f32, u64)>::uninit(); STACK]);
-        let stack = &mut stack.0;
+        let mut stack = WalkStack::<u64>::new();
         let mut sp = 0;
-        let (mut code, mut entered) = (self.root, all);
+        let (mut code, mut entered) = (self.tree.root, all);
         let inf = _mm256_set1_ps(f32::INFINITY);
         loop {
-            let node = &self.nodes[code as usize];
+            let node = &self.tree.nodes[code as usize];
             let rows = node.bounds.as_ptr() as *const f32;
             let load = |p: usize| _mm256_load_ps(rows.add(p * W));
             let lo = [load(near_plane[0]), load(near_plane[1]), load(near_plane[2])];
@@ -165,7 +165,7 @@ impl<const W: usize> WideBvh<W> {
                     b &= b - 1;
                     self.prefetch(node.child[lane]);
                 }
-                let base = sp;
+                let mark = sp;
                 let mut b = entered_children;
                 while b != 0 {
                     let lane = b.trailing_zeros() as usize;
@@ -176,8 +176,7 @@ impl<const W: usize> WideBvh<W> {
                         continue;
                     }
                     if child & LEAF_BIT == 0 {
-                        stack[sp].write((child, child_near[lane], r));
-                        sp += 1;
+                        stack.push(&mut sp, child, child_near[lane], r);
                         continue;
                     }
                     let leaf = self.leaf_of(child);
@@ -198,31 +197,30 @@ impl<const W: usize> WideBvh<W> {
                         s.far[k] = s.tmax[k] * crate::accel::bvh::ROBUST_SCALE;
                     }
                 }
-                super::kernels::sort_far_first(std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32, u64), sp - base), |e| e.1);
+                stack.order_since(mark, sp, ChildOrder::NearestFirst);
             }
             // The next stacked node that a ray entered no farther than its
             // current closest hit.
-            loop {
-                if sp == 0 {
-                    for k in 0..n {
-                        hits[s.index[k] as usize] = best[k];
-                    }
-                    return;
-                }
-                sp -= 1;
-                let (c, d, r) = stack[sp].assume_init();
+            let far = &s.far;
+            let next = stack.pop_where(&mut sp, |d, r| {
                 let mut live = 0u64;
                 let mut m = r;
                 while m != 0 {
                     let k = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    if d <= s.far[k] {
+                    if d <= far[k] {
                         live |= 1 << k;
                     }
                 }
-                if live != 0 {
-                    (code, entered) = (c, live);
-                    break;
+                (live != 0).then_some(live)
+            });
+            match next {
+                Some(e) => (code, entered) = e,
+                None => {
+                    for k in 0..n {
+                        hits[s.index[k] as usize] = best[k];
+                    }
+                    return;
                 }
             }
         }

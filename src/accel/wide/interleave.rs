@@ -8,12 +8,12 @@
 //! out-of-order core several chains to work on. Each ray still takes exactly
 //! the single-ray path (same tests, same order), so answers are identical.
 
-use super::{Shear, Slab, WideBvh, EMPTY, LEAF_BIT, STACK};
+use super::stack::WalkStack;
+use super::{Shear, Slab, WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::prims::closer;
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
-use std::mem::MaybeUninit;
 
 /// Structures at least this large trace incoherent batches interleaved.
 /// Random rays, 4 in flight against 1 (`pathtracer bench`, 2-core EPYC with
@@ -44,7 +44,7 @@ pub(super) const COLD_LINES: f64 = 3.0;
 const IN_FLIGHT: usize = 4;
 
 /// One ray's traversal state between steps; cache-aligned, which also
-/// aligns the frame of the function holding the walkers (`CacheAligned`).
+/// aligns the frame of the function holding the walkers (`WalkStack`).
 #[repr(align(64))]
 struct Walker {
     /// Index of the ray in the batch.
@@ -56,14 +56,14 @@ struct Walker {
     best: Option<Hit>,
     cur: u32,
     sp: usize,
-    stack: [MaybeUninit<(u32, f32)>; STACK],
+    stack: WalkStack<()>,
 }
 
 impl Walker {
     fn idle() -> Walker {
         let r = Ray::new(glam::Vec3::ZERO, glam::Vec3::X);
         let rt = RayTransform::new(r.origin, r.dir);
-        Walker { ray: usize::MAX, shear: Shear::new(&rt), rt, slab: Slab::new(&r), tmax: 0.0, best: None, cur: EMPTY, sp: 0, stack: [MaybeUninit::uninit(); STACK] }
+        Walker { ray: usize::MAX, shear: Shear::new(&rt), rt, slab: Slab::new(&r), tmax: 0.0, best: None, cur: EMPTY, sp: 0, stack: WalkStack::new() }
     }
 
     fn start(&mut self, i: usize, r: &Ray, root: u32) {
@@ -89,10 +89,10 @@ impl<const W: usize> WideBvh<W> {
     /// `hits[i]` = the closest hit of `rays[i]`, `IN_FLIGHT` rays at a time.
     ///
     /// # Safety
-    /// The CPU must have AVX2 (`self.avx`).
+    /// The CPU must have AVX2 (`self.policy.avx()`).
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_interleaved_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        if self.root == EMPTY {
+        if self.tree.root == EMPTY {
             hits.fill(None);
             return;
         }
@@ -113,7 +113,7 @@ impl<const W: usize> WideBvh<W> {
         let mut live = 0u32;
         for k in 0..IN_FLIGHT {
             if let Some(i) = take(hits) {
-                w[k].start(i, &rays[i], self.root);
+                w[k].start(i, &rays[i], self.tree.root);
                 live |= 1 << k;
             }
         }
@@ -126,7 +126,7 @@ impl<const W: usize> WideBvh<W> {
                 if self.step(wk, &rays[wk.ray]) {
                     hits[wk.ray] = wk.best;
                     match take(hits) {
-                        Some(i) => wk.start(i, &rays[i], self.root),
+                        Some(i) => wk.start(i, &rays[i], self.tree.root),
                         None => live &= !(1 << k),
                     }
                 }
@@ -148,7 +148,7 @@ impl<const W: usize> WideBvh<W> {
                 false
             });
         } else {
-            let node = &self.nodes[w.cur as usize];
+            let node = &self.tree.nodes[w.cur as usize];
             let mut near = [0.0f32; W];
             let mask = w.slab.test::<W, true>(node, ray.tmin, w.tmax, &mut near);
             if mask != 0 {
@@ -156,12 +156,12 @@ impl<const W: usize> WideBvh<W> {
                     w.cur = node.child[mask.trailing_zeros() as usize];
                     return false;
                 }
-                w.sp = self.push_children(node, mask, &near, &mut w.stack, w.sp, super::ChildOrder::NearestFirst) - 1;
-                w.cur = w.stack[w.sp].assume_init().0;
+                self.push_entered(&mut w.stack, &mut w.sp, node, mask, &near, super::ChildOrder::NearestFirst);
+                w.cur = w.stack.take_top(&mut w.sp).0;
                 return false;
             }
         }
-        match super::pop_within(&w.stack, &mut w.sp, w.tmax) {
+        match w.stack.pop_within(&mut w.sp, w.tmax) {
             Some(code) => {
                 w.cur = code;
                 false

@@ -28,8 +28,8 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn leaf_rays_x8(&self, leaf: &super::Leaf, soa: &RaysSoA, rays_in: u64, k: [usize; 3], tmax: &[f32; PACKET]) -> u64 {
         let mut left = rays_in;
         for gi in leaf.group..leaf.group + leaf.n_groups {
-            let g = &self.groups[gi as usize];
-            let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let g = &self.tree.groups[gi as usize];
+            let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
             for (lane, id) in ids.iter().enumerate() {
                 if id[0] == EMPTY {
                     continue;
@@ -128,8 +128,8 @@ impl<const W: usize> WideBvh<W> {
         }
         let mut found = [false; 2];
         for gi in leaf.group..leaf.group + leaf.n_groups {
-            let g = &self.groups[gi as usize];
-            let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let g = &self.tree.groups[gi as usize];
+            let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
             let mut out = [[LaneHit::default(); LANES]; 2];
             let masks = intersect_group_x2(g, rt, sh, tmin, range, &mut out);
             take_hits::<false, 2>(ij, masks, &out, ids, &mut found, tmax, hits);
@@ -145,12 +145,12 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn leaf_pair_any(&self, leaf: &super::Leaf, rt: [&RayTransform; 2], sh: [&Shear; 2], tmin: [f32; 2], tmax: [f32; 2]) -> [bool; 2] {
         let mut found = [false; 2];
         for gi in leaf.group..leaf.group + leaf.n_groups {
-            let g = &self.groups[gi as usize];
+            let g = &self.tree.groups[gi as usize];
             // Padding lanes are told apart only for a hit: the ids sit apart
             // from the vertices, and loading them for every group missed the
             // caches (8 % of grass's streamed shadow rays).
             let real = |m: u32| {
-                let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+                let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
                 m != 0 && (0..LANES).any(|l| m >> l & 1 != 0 && ids[l][0] != EMPTY)
             };
             let mut out = [[LaneHit::default(); LANES]; 2];
@@ -189,8 +189,8 @@ impl<const W: usize> WideBvh<W> {
         let range = quad.map(|i| tmax[i]);
         let mut found = [false; 4];
         for gi in leaf.group..leaf.group + leaf.n_groups {
-            let g = &self.groups[gi as usize];
-            let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let g = &self.tree.groups[gi as usize];
+            let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
             let mut out = [[LaneHit::default(); LANES]; 4];
             let masks = intersect_group_x4(g, rt, sh, tmin, range, &mut out);
             take_hits::<ANY, 4>(quad, masks, &out, ids, &mut found, tmax, hits);

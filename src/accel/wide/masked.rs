@@ -25,7 +25,8 @@
 use super::kernels::Slab;
 use super::triangle::Shear;
 use super::packet::{RaysSoA, PACKET};
-use super::{WideBvh, EMPTY, LEAF_BIT, STACK};
+use super::stack::WalkStack;
+use super::{WideBvh, EMPTY, LEAF_BIT};
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use std::mem::MaybeUninit;
@@ -56,10 +57,10 @@ impl<const W: usize> WideBvh<W> {
                 tmax[i] = soa.tmax[i];
             }
         }
-        if active == 0 || self.root == EMPTY {
+        if active == 0 || self.tree.root == EMPTY {
             return;
         }
-        if self.root & LEAF_BIT != 0 {
+        if self.tree.root & LEAF_BIT != 0 {
             for i in 0..n {
                 if active & (1 << i) != 0 {
                     out[i] = self.any::<true>(&rays[i], order);
@@ -71,15 +72,13 @@ impl<const W: usize> WideBvh<W> {
         let mut setup: u64 = 0;
         // One axis permutation for all rays: leaves as in `frustum_packet`.
         let shared_axes = soa.shared_axes();
-        // Stack of (node, the rays that entered it, their nearest entry).
-        // A cache-aligned frame (`CacheAligned`).
-        let mut stack = super::CacheAligned([MaybeUninit::<(u32, u32, f32)>::uninit(); STACK]);
-        let stack = &mut stack.0;
+        // Stack of (node, the rays' nearest entry, the rays that entered it).
+        let mut stack = WalkStack::<u32>::new();
         let mut sp = 0;
-        let (mut code, mut entered) = (self.root, active);
+        let (mut code, mut entered) = (self.tree.root, active);
         let inf = _mm256_set1_ps(f32::INFINITY);
         loop {
-            let node = &self.nodes[code as usize];
+            let node = &self.tree.nodes[code as usize];
             // Each ray that entered this node against its 8 boxes: per
             // child, the bits of the rays entering it and their nearest
             // entry distance.
@@ -98,7 +97,7 @@ impl<const W: usize> WideBvh<W> {
             let mut child_near = [0.0f32; 8];
             _mm256_storeu_si256(child_rays.as_mut_ptr() as *mut __m256i, masks);
             _mm256_storeu_ps(child_near.as_mut_ptr(), near);
-            let base = sp;
+            let mark = sp;
             for lane in 0..W {
                 let (child, r) = (node.child[lane], child_rays[lane] & active);
                 if r == 0 || child == EMPTY {
@@ -106,8 +105,7 @@ impl<const W: usize> WideBvh<W> {
                 }
                 if child & LEAF_BIT == 0 {
                     self.prefetch_for_packet(node, 1 << lane);
-                    stack[sp].write((child, r, child_near[lane]));
-                    sp += 1;
+                    stack.push(&mut sp, child, child_near[lane], r);
                     continue;
                 }
                 // A leaf: the rays that entered it test its triangles, two at
@@ -124,18 +122,11 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             // The child `order` visits next on top (see `ChildOrder`).
-            order.sort_pushed(std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, u32, f32), sp - base), |e| e.2);
+            stack.order_since(mark, sp, order);
             // Pop the next node some still-unoccluded ray entered.
-            loop {
-                if sp == 0 {
-                    return;
-                }
-                sp -= 1;
-                let (c, r, _) = stack[sp].assume_init();
-                if r & active != 0 {
-                    (code, entered) = (c, r);
-                    break;
-                }
+            match stack.pop_where(&mut sp, |_, r| (r & active != 0).then_some(r)) {
+                Some(e) => (code, entered) = e,
+                None => return,
             }
         }
     }

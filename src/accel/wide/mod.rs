@@ -1,15 +1,24 @@
-//! The native backend's fast layout: the binned-SAH binary tree collapsed
-//! into a `W`-wide BVH (`W` = 4 or 8), whose child boxes are tested all at
-//! once (AVX2 for 8 boxes where the CPU has it, chosen at run time; SSE2,
-//! part of every x86-64 CPU, 4 boxes at a time otherwise), and leaves of
-//! triangles packed 4 to a group and tested together.
+//! The native backend: a `W`-wide BVH (`W` = 4 or 8) built straight from
+//! binned-SAH splits (`layout`), whose child boxes are tested all at once
+//! (AVX2 for 8 boxes where the CPU has it; SSE2, part of every x86-64 CPU,
+//! 4 boxes at a time otherwise), and leaves of triangles packed 4 to a group
+//! and tested together.
 //!
-//! Traversal modes: single rays front to back, any-hit rays in the child
-//! order a sample of their batch favours (`single`); coherent batches as
-//! 16-ray frusta (`frustum`), their leaves tested for several rays at once
-//! (`leaf_rays`); incoherent batches over large structures whose rays are
-//! expected to miss the caches (`cost`) with 4 rays interleaved
-//! (`interleave`).
+//! Two types: the tree's data (`Tree`: nodes, leaves, triangle groups) and
+//! how it is traversed (`policy::Policy`: instruction sets, the way each
+//! kind of batch goes, the any-hit child order), both fixed when the tree is
+//! built. Every traversal walks the tree with one stack and its two steps,
+//! push the entered children and cull on pop (`stack`):
+//!
+//! * single rays front to back (`single`), the walk the others fall back on;
+//! * coherent batches as 16-ray frusta (`frustum`), their leaves tested for
+//!   several rays at once (`leaf_rays`); shadow packets as swept boxes
+//!   (`sweep`) or with a ray mask per node (`masked`), after the occluder
+//!   cache (`occluders`);
+//! * incoherent batches over trees too large for the caches (`cost`) with 4
+//!   rays interleaved (`interleave`), or in streams with a ray mask per node
+//!   where a batch's rays start close together (`hit_stream`; shadow rays:
+//!   `stream`).
 //!
 //! The kernels are written once over the lane width (`lanes`: 4, 8 or 16
 //! f32 lanes behind one trait): the slab test of a node's boxes
@@ -20,8 +29,8 @@
 //! Every lane performs exactly the scalar operations of `intersect_triangle`
 //! and of a scalar slab test, in the same order, so answers are
 //! bit-identical to the scalar code (and so to the brute-force oracle)
-//! whatever the instruction set. Other targets run the scalar lane loops,
-//! which give the same answers.
+//! whatever the instruction set or way. Other targets run the scalar lane
+//! loops, which give the same answers.
 
 mod cost;
 mod frustum;
@@ -36,11 +45,17 @@ mod masked;
 mod occluders;
 mod sweep;
 mod packet;
+mod policy;
 mod single;
+mod stack;
 mod stream;
 mod triangle;
 
-use single::{pop_within, ChildOrder};
+#[cfg(test)]
+use policy::avx_available;
+use policy::{ClosestBatches, Otherwise, PacketPrefetch, Policy};
+pub use policy::simd_level;
+use stack::ChildOrder;
 
 use kernels::Slab;
 use triangle::{intersect_group, LaneHit, Shear};
@@ -106,7 +121,9 @@ struct Leaf {
     n_spheres: u32,
 }
 
-pub struct WideBvh<const W: usize> {
+/// The tree's data: what the build makes, and nothing of how it is
+/// traversed (`policy`).
+pub(super) struct Tree<const W: usize> {
     nodes: Vec<Node<W>>,
     leaves: Vec<Leaf>,
     groups: Vec<TriGroup>,
@@ -115,111 +132,21 @@ pub struct WideBvh<const W: usize> {
     spheres: Vec<Prim>,
     /// The root: a node, or a leaf when the scene is tiny.
     root: u32,
+    /// The root's box.
+    bounds: crate::geometry::Aabb,
     /// Half area of the root's box, for the SAH cost (computed on demand,
     /// see `sah`: it is a report, not part of the build).
     root_area: f64,
     /// Length of the root box's diagonal: the scale against which a
     /// batch's coherence is judged (`streams_pay`).
     root_diagonal: f32,
-    /// Box tests with AVX2 (8 boxes per instruction): `W` = 8 on a CPU that
-    /// has it, unless `PATHTRACER_NATIVE_ISA=sse` asks for the SSE2 path.
-    avx: bool,
-    /// Coherent packets with AVX-512 (16 rays per leaf box test, 4 rays per
-    /// triangle group test); see `avx512_available`.
-    avx512: bool,
-    /// Trace incoherent batches several rays at a time (`interleave`): the
-    /// structure is too large for the caches, so traversal waits on memory.
-    interleave: bool,
-    /// Packets prefetch the leaves (and masked packets the nodes) they are
-    /// about to enter (`PACKET_PREFETCH_BYTES`).
-    prefetch_packets: bool,
-    /// Coherent occlusion batches go in streams (`stream`) rather than
-    /// packets: the tree is large and its rays miss the caches (see
-    /// `stream`), or the build options ask for streams (`ShadowWay`).
-    stream_shadows: bool,
-    /// How incoherent closest-hit batches go (`BatchWay`; `Auto` decides
-    /// per batch).
-    batch: super::BatchWay,
-    /// The any-hit child order last chosen (`any_order`): 0 none yet, 1
-    /// farthest first, 2 nearest first; and the batches that asked.
-    any_order: std::sync::atomic::AtomicU8,
-    order_calls: std::sync::atomic::AtomicU32,
-    /// The work of the samples so far, farthest first and nearest first,
-    /// each older sample's share decaying by `ORDER_DECAY`.
-    order_work: [std::sync::atomic::AtomicU32; 2],
 }
 
-/// The SIMD level native traversal runs at on this CPU with `isa`: "AVX2",
-/// "AVX2, AVX-512 packets" or "SSE2".
-pub fn simd_level(isa: super::NativeIsa) -> &'static str {
-    if avx512_available(isa) {
-        "AVX2, AVX-512 packets"
-    } else if avx_available_for(isa) {
-        "AVX2"
-    } else {
-        "SSE2"
-    }
-}
-
-/// Whether this CPU runs the AVX2 box test.
-fn avx_available() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
-/// Whether a tree built with `isa` runs the AVX2 kernels.
-fn avx_available_for(isa: super::NativeIsa) -> bool {
-    isa != super::NativeIsa::Sse2 && avx_available()
-}
-
-/// A traversal's stack frame holder: a local of this type makes the
-/// function realign its stack frame to a cache line, so where the compiler
-/// spills the ray's broadcast slab vectors (32-byte AVX loads on every node
-/// visit) does not depend on the callers' frames. Without it, the same
-/// machine code ran random rays 20 % slower in one build than in another
-/// (CBbunny 12.5 against 15.5 Mrays/s, 1 thread): its spills straddled
-/// cache lines.
-#[repr(C, align(64))]
-pub(super) struct CacheAligned<T>(pub(super) T);
-
-/// Structures at least this large have packets prefetch what they enter;
-/// smaller ones stay in the caches, where the prefetches only cost issue
-/// slots and fill buffers. Measured (1 thread, Mrays/s, camera / shadow,
-/// prefetching against none, the same binary): on a 16-core Xeon
-/// (Emerald Rapids) CBbunny (1.8 MiB) 32.8-33.1 / 16.5-16.8 against 34.2 /
-/// 17.5, beetle 42.4-43.9 / 11.7 against 45.0 / 12.3, maxplanck (3.5 MiB)
-/// 22.0-22.4 / 6.0-6.1 against 23.3 / 5.9; on this project's EPYC within
-/// 2 % either way. But the 1M-triangle sphere (65 MiB) 18.1-18.7 / 3.5
-/// against 14.7 / 2.6 and subdivided bunny (121 MiB) 18.5-18.9 / 3.3-3.5
-/// against 16.8 / 3.1 need them. Single rays keep prefetching everywhere:
-/// on small trees it is worth 3-6 % of random rays on the EPYC and on the
-/// Xeon's maxplanck (CBbunny there: 3 % the other way).
-const PACKET_PREFETCH_BYTES: usize = 16 << 20;
-
-/// Whether to run the AVX-512 packet kernels: only when asked for
-/// (`NativeIsa::Avx512Packets`, `PATHTRACER_NATIVE_ISA=avx512` on the
-/// command line) and the CPU has AVX-512F. Not the
-/// default, by measurement (1 thread, Mrays/s, AVX2 against AVX-512, three
-/// runs each, medians): on this project's 2-core AMD EPYC (Zen 5) within
-/// noise on every scene (cow camera 65.8/65.4, CBbunny shadow 22.3/23.0,
-/// 1M sphere camera 29.1/29.0); on a 16-vCPU Intel Xeon the 1M
-/// camera rays lost 30 % (18.9 against 13.2), likely the lower clock Intel
-/// CPUs run AVX-512 code at.
-fn avx512_available(isa: super::NativeIsa) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        isa == super::NativeIsa::Avx512Packets && avx_available() && is_x86_feature_detected!("avx512f")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
+/// The native backend's tree and the way it is traversed (`policy`), both
+/// fixed when it is built.
+pub struct WideBvh<const W: usize> {
+    tree: Tree<W>,
+    policy: Policy,
 }
 
 impl<const W: usize> WideBvh<W> {
@@ -243,23 +170,19 @@ impl<const W: usize> WideBvh<W> {
         let spare = (prims.len() as f64 * budget) as usize;
         let mut refs = prim_refs(&prims, spare);
         let mut out = Arrays::<W>::default();
-        let (mut root, mut root_area, mut root_diagonal) = (EMPTY, 0.0, 0.0);
+        let (mut root, mut bounds) = (EMPTY, crate::geometry::Aabb::EMPTY);
         if let Some(set) = BuildSet::root(&mut refs, prims.len()) {
-            root_area = set.half_area() as f64;
-            root_diagonal = set.bounds().extent().length();
+            bounds = set.bounds();
             let mut part = layout::Part::with_room_for(prims.len());
             let code = part.build(set, &prims);
             (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, &prims);
         }
-        let mut b = WideBvh { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, root_area, root_diagonal, avx: W == 8 && avx_available_for(options.isa), avx512: W == 8 && avx512_available(options.isa), interleave: false, prefetch_packets: false, stream_shadows: false, batch: options.batch, any_order: Default::default(), order_calls: Default::default(), order_work: Default::default() };
-        b.interleave = b.avx && b.interleave_pays();
-        b.prefetch_packets = b.memory_bytes() >= PACKET_PREFETCH_BYTES;
-        b.stream_shadows = b.avx
-            && match options.shadow {
-                super::ShadowWay::Auto => b.interleave && b.memory_bytes() >= STREAM_MIN_BYTES,
-                super::ShadowWay::Streams => true,
-                super::ShadowWay::Packets => false,
-            };
+        let root_area = if root == EMPTY { 0.0 } else { bounds.half_area() as f64 };
+        let tree = Tree { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, bounds, root_area, root_diagonal: bounds.extent().length() };
+        // The policy is chosen from the tree, through the traversals that
+        // need no policy of their own (scalar box tests).
+        let mut b = WideBvh { tree, policy: Policy::PROVISIONAL };
+        b.policy = Policy::choose(&b, options);
         b
     }
 
@@ -269,7 +192,7 @@ impl<const W: usize> WideBvh<W> {
         if code & INLINE_BIT != 0 {
             Leaf { group: code & INLINE_GROUP_LIMIT, n_groups: (code >> 28) & 3, sphere: 0, n_spheres: 0 }
         } else {
-            self.leaves[(code & !LEAF_BIT) as usize]
+            self.tree.leaves[(code & !LEAF_BIT) as usize]
         }
     }
 
@@ -282,8 +205,8 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     fn leaf<F: FnMut(Hit) -> bool>(&self, leaf: &Leaf, ray: &Ray, rt: &RayTransform, shear: &Shear, tmax: f32, visit: &mut F) -> bool {
         for gi in leaf.group..leaf.group + leaf.n_groups {
-            let g = &self.groups[gi as usize];
-            let ids = &self.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let g = &self.tree.groups[gi as usize];
+            let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
             let mut out = [LaneHit::default(); LANES];
             let mask = intersect_group(g, rt, shear, ray.tmin, tmax, &mut out);
             for lane in 0..LANES {
@@ -295,7 +218,7 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
         }
-        for p in &self.spheres[leaf.sphere as usize..(leaf.sphere + leaf.n_spheres) as usize] {
+        for p in &self.tree.spheres[leaf.sphere as usize..(leaf.sphere + leaf.n_spheres) as usize] {
             if let Some((t, u, v)) = p.intersect(rt, ray.dir, ray.tmin, tmax) {
                 if visit(p.hit(t, u, v)) {
                     return true;
@@ -313,9 +236,9 @@ impl<const W: usize> WideBvh<W> {
         unsafe {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
             let (ptr, bytes) = if code & LEAF_BIT == 0 {
-                (self.nodes.as_ptr().add(code as usize) as *const i8, std::mem::size_of::<Node<W>>())
+                (self.tree.nodes.as_ptr().add(code as usize) as *const i8, std::mem::size_of::<Node<W>>())
             } else if code & INLINE_BIT != 0 {
-                (self.groups.as_ptr().add((code & INLINE_GROUP_LIMIT) as usize) as *const i8, ((code >> 28) & 3) as usize * std::mem::size_of::<TriGroup>())
+                (self.tree.groups.as_ptr().add((code & INLINE_GROUP_LIMIT) as usize) as *const i8, ((code >> 28) & 3) as usize * std::mem::size_of::<TriGroup>())
             } else {
                 return;
             };
@@ -329,10 +252,10 @@ impl<const W: usize> WideBvh<W> {
 
     /// `prefetch` of the children of `node` in `mask`, for a packet about to
     /// enter them: only in trees large enough to miss the caches
-    /// (`PACKET_PREFETCH_BYTES`).
+    /// (`Policy::prefetch`).
     #[inline(always)]
     fn prefetch_for_packet(&self, node: &Node<W>, mask: u32) {
-        if !self.prefetch_packets {
+        if self.policy.prefetch == PacketPrefetch::Off {
             return;
         }
         let mut m = mask;
@@ -341,19 +264,6 @@ impl<const W: usize> WideBvh<W> {
             m &= m - 1;
         }
     }
-}
-
-/// A running sum that keeps `decay.0 / decay.1` of what it held and adds
-/// `sample`; returns the new sum. For the counted choice of any-hit child
-/// order (`any_order`): concurrent samples may lose one
-/// another's update, and only the speed depends on these sums, never an
-/// answer.
-#[inline(always)]
-fn decayed_sum(w: &std::sync::atomic::AtomicU32, sample: u32, decay: (u32, u32)) -> u32 {
-    use std::sync::atomic::Ordering::Relaxed;
-    let v = (w.load(Relaxed) / decay.1 * decay.0).saturating_add(sample);
-    w.store(v, Relaxed);
-    v
 }
 
 impl<const W: usize> Traversal for WideBvh<W> {
@@ -371,14 +281,18 @@ impl<const W: usize> Traversal for WideBvh<W> {
         Some((sah.nodes, sah.leaves))
     }
 
+    fn choices(&self) -> Option<String> {
+        Some(self.policy.describe())
+    }
+
     fn describe(&self) -> String {
         let sah = self.sah();
         format!(
             "native ({W}-wide BVH, binned SAH, {}, {} nodes, {} triangle groups of 4, {} leaf records, SAH cost {:.2} = nodes {:.2} + leaves {:.2})",
-            if self.avx512 { "AVX2, AVX-512 packets" } else if self.avx { "AVX2" } else { "SSE2" },
-            self.nodes.len(),
-            self.groups.len(),
-            self.leaves.len(),
+            self.policy.describe(),
+            self.tree.nodes.len(),
+            self.tree.groups.len(),
+            self.tree.leaves.len(),
             sah.nodes + sah.leaves,
             sah.nodes,
             sah.leaves
@@ -386,11 +300,11 @@ impl<const W: usize> Traversal for WideBvh<W> {
     }
 
     fn memory_bytes(&self) -> usize {
-        self.nodes.len() * std::mem::size_of::<Node<W>>()
-            + self.leaves.len() * std::mem::size_of::<Leaf>()
-            + self.groups.len() * std::mem::size_of::<TriGroup>()
-            + self.ids.len() * 8
-            + self.spheres.len() * std::mem::size_of::<Prim>()
+        self.tree.nodes.len() * std::mem::size_of::<Node<W>>()
+            + self.tree.leaves.len() * std::mem::size_of::<Leaf>()
+            + self.tree.groups.len() * std::mem::size_of::<TriGroup>()
+            + self.tree.ids.len() * 8
+            + self.tree.spheres.len() * std::mem::size_of::<Prim>()
     }
 
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
@@ -398,8 +312,8 @@ impl<const W: usize> Traversal for WideBvh<W> {
         // interleaved walkers and would pay for setting them up.
         let mut hit = [None];
         #[cfg(target_arch = "x86_64")]
-        if self.avx {
-            // SAFETY: `avx` is only set when the CPU has AVX2.
+        if self.policy.avx() {
+            // SAFETY: the policy has AVX2 box tests only where the CPU has AVX2.
             unsafe { self.closest_all_avx(std::slice::from_ref(ray), &mut hit) };
             return hit[0];
         }
@@ -416,16 +330,14 @@ impl<const W: usize> Traversal for WideBvh<W> {
     fn intersect_batch(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), hits.len());
         #[cfg(target_arch = "x86_64")]
-        if self.avx {
-            // SAFETY: `avx` is only set when the CPU has AVX2.
-            use super::BatchWay;
+        if self.policy.avx() {
+            // SAFETY: the policy has AVX2 box tests only where the CPU has AVX2.
             return unsafe {
-                match self.batch {
-                    BatchWay::Streams if W == 8 => self.closest_streams(rays, hits),
-                    BatchWay::Auto if W == 8 && self.streams_pay(rays) => self.closest_streams(rays, hits),
-                    BatchWay::Auto if self.interleave => self.closest_interleaved_avx(rays, hits),
-                    BatchWay::Interleaved => self.closest_interleaved_avx(rays, hits),
-                    _ => self.closest_all_avx(rays, hits),
+                match self.policy.closest {
+                    ClosestBatches::Streams => self.closest_streams(rays, hits),
+                    ClosestBatches::StreamsWhereCoherent { .. } if self.streams_pay(rays) => self.closest_streams(rays, hits),
+                    ClosestBatches::Interleaved | ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Interleaved } => self.closest_interleaved_avx(rays, hits),
+                    ClosestBatches::Single | ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Single } => self.closest_all_avx(rays, hits),
                 }
             };
         }
@@ -435,7 +347,7 @@ impl<const W: usize> Traversal for WideBvh<W> {
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len());
         #[cfg(target_arch = "x86_64")]
-        if self.avx {
+        if self.policy.avx() {
             // SAFETY: as above.
             return unsafe { self.any_all_avx(rays, out) };
         }
@@ -445,13 +357,13 @@ impl<const W: usize> Traversal for WideBvh<W> {
     fn intersect_coherent(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), hits.len());
         #[cfg(target_arch = "x86_64")]
-        if self.avx512 {
-            // SAFETY: `avx512` is only set when the CPU has AVX2 and AVX-512F.
+        if self.policy.avx512() {
+            // SAFETY: the policy has AVX-512 packets only where the CPU has AVX2 and AVX-512F.
             return unsafe { self.closest_coherent_avx512(rays, hits) };
         }
         #[cfg(target_arch = "x86_64")]
-        if self.avx && W == 8 {
-            // SAFETY: `avx` is only set when the CPU has AVX2.
+        if self.policy.avx() && W == 8 {
+            // SAFETY: the policy has AVX2 box tests only where the CPU has AVX2.
             return unsafe { self.closest_coherent_avx(rays, hits) };
         }
         self.closest_all::<false>(rays, hits)
@@ -460,12 +372,12 @@ impl<const W: usize> Traversal for WideBvh<W> {
     fn occluded_coherent(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len());
         #[cfg(target_arch = "x86_64")]
-        if self.avx512 {
+        if self.policy.avx512() {
             // SAFETY: as above.
             return unsafe { self.any_coherent_avx512(rays, out) };
         }
         #[cfg(target_arch = "x86_64")]
-        if self.avx && W == 8 {
+        if self.policy.avx() && W == 8 {
             // SAFETY: as above.
             return unsafe { self.any_coherent_avx(rays, out) };
         }

@@ -84,7 +84,7 @@ impl OccluderCache {
         self.tried += n as u32;
         let mut left = all;
         for &code in &self.tris[..self.len] {
-            let g = &bvh.groups[code as usize / LANES];
+            let g = &bvh.tree.groups[code as usize / LANES];
             for half in 0..PACKET / 8 {
                 if (left >> (8 * half)) & 0xff != 0 {
                     left &= !(soa.hits_triangle(g, code as usize % LANES, half, k, &soa.tmax) << (8 * half));

@@ -1,57 +1,46 @@
 //! Single rays, front to back: the 8-wide walk every other traversal
 //! falls back on (`walk`), closest and any hit for one ray and for
 //! batches traced ray by ray, and the child order any-hit rays take,
-//! chosen per batch from a sample of its rays (`any_order`).
+//! chosen when the tree is built from a sample of shadow-like rays over
+//! its own triangles (`any_order_of`).
 
-use super::kernels::{sort_far_first, Slab};
+use super::kernels::Slab;
 use super::triangle::Shear;
-use super::{decayed_sum, CacheAligned, Node, WideBvh, EMPTY, LEAF_BIT, STACK};
+use super::stack::{ChildOrder, WalkStack};
+use super::{WideBvh, EMPTY, LANES, LEAF_BIT};
 use crate::accel::prims::closer;
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
-use std::mem::MaybeUninit;
 
-/// Occlusion batches of at least this many rays may choose the any-hit
-/// child order from `ORDER_SAMPLE` of them (`any_order`), every
-/// `ORDER_REFRESH` such batches.
-pub(super) const ORDER_MIN_BATCH: usize = 256;
-const ORDER_SAMPLE: usize = 16;
-const ORDER_REFRESH: u32 = 16;
-/// Each sample's work is added to a running sum that keeps 3/4 of the
-/// older ones, and the choice follows the sums: one sample of 16 rays
-/// was too noisy. On the subdivided bunny's shadow rays (1 thread, 65
-/// samples) the single samples chose nearest first 28 times while their
-/// sums favoured farthest first 14.0k to 16.9k visits, and the batches
-/// ran at 4.2 Mrays/s against 5.9 with farthest first throughout.
-const ORDER_DECAY: (u32, u32) = (3, 4);
+/// Rays in the sample that chooses the any-hit child order
+/// (`any_order_of`): from 512 to 4096 rays the weighted ratios moved by
+/// 4 % at most (subdiv:bunny:100k 1.16 to 1.12), no choice with them.
+const ORDER_SAMPLE: usize = 512;
 /// Nearest first is chosen only where its sampled work is below 7/8 of
 /// farthest first's. The sample times single rays; coherent batches go in
 /// packets, where nearest first's saving showed up smaller: on maxplanck
 /// its sums were 5 % below farthest first's, yet its shadow rays ran at
 /// 10.7 Mrays/s against 11.8 (1 thread); on stadium 22 % below (24.1
 /// against 19.8 Mrays/s), on grass 62 % below (0.24 against 0.15).
-const ORDER_MARGIN: (u64, u64) = (7, 8);
+const ORDER_MARGIN: (f64, f64) = (7.0, 8.0);
 
 impl<const W: usize> WideBvh<W> {
     /// Front-to-back traversal; `visit` may lower `tmax` and returns true to
     /// stop. `AVX` selects the AVX2 box test, which the caller must have
-    /// checked the CPU has (`self.avx`) and compiled for (`#[target_feature]`).
+    /// checked the CPU has (`self.policy.avx()`) and compiled for (`#[target_feature]`).
     #[inline(always)]
     fn walk<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32, mut visit: F) {
-        if self.root == EMPTY {
+        if self.tree.root == EMPTY {
             return;
         }
         let rt = RayTransform::new(ray.origin, ray.dir);
         let shear = Shear::new(&rt);
         let slab = Slab::new(ray);
         let mut tmax = ray.tmax;
-        // Stack of (child code, entry distance), not initialised: only
-        // entries below `sp` are read.
-        let mut stack = CacheAligned([MaybeUninit::<(u32, f32)>::uninit(); STACK]);
-        let stack = &mut stack.0;
+        let mut stack = WalkStack::<()>::new();
         let mut sp = 0;
-        let mut cur = self.root;
+        let mut cur = self.tree.root;
         loop {
             if cur & LEAF_BIT != 0 {
                 let leaf = self.leaf_of(cur);
@@ -66,52 +55,28 @@ impl<const W: usize> WideBvh<W> {
                 }
             } else {
                 *work += 1;
-                let node = &self.nodes[cur as usize];
+                let node = &self.tree.nodes[cur as usize];
                 let mut near = [0.0f32; W];
                 let mask = slab.test::<W, AVX>(node, ray.tmin, tmax, &mut near);
                 if mask != 0 {
-                    let first = mask.trailing_zeros() as usize;
                     if mask & (mask - 1) == 0 {
                         // One child entered: no stack traffic.
-                        cur = node.child[first];
+                        cur = node.child[mask.trailing_zeros() as usize];
                         continue;
                     }
                     // Push every entered child (the one `order` visits
                     // next on top), and continue with the top one.
-                    sp = self.push_children(node, mask, &near, stack, sp, order);
-                    sp -= 1;
-                    // SAFETY: push_children wrote the entry at the old top.
-                    cur = unsafe { stack[sp].assume_init() }.0;
+                    self.push_entered(&mut stack, &mut sp, node, mask, &near, order);
+                    cur = stack.take_top(&mut sp).0;
                     continue;
                 }
             }
             // Pop, skipping subtrees that start beyond the current closest hit.
-            match pop_within(stack, &mut sp, tmax) {
+            match stack.pop_within(&mut sp, tmax) {
                 Some(code) => cur = code,
                 None => return,
             }
         }
-    }
-
-    /// Push the children of `node` in `mask` with their entry distances,
-    /// starting their fetches, the one to visit next on top as `order`
-    /// says. Returns the new stack height.
-    #[inline(always)]
-    pub(super) fn push_children(&self, node: &Node<W>, mask: u32, near: &[f32; W], stack: &mut [MaybeUninit<(u32, f32)>; STACK], mut sp: usize, order: ChildOrder) -> usize {
-        let base = sp;
-        let mut m = mask;
-        while m != 0 {
-            let lane = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let code = node.child[lane];
-            self.prefetch(code);
-            stack[sp].write((code, near[lane]));
-            sp += 1;
-        }
-        // SAFETY: entries base..sp were written just above.
-        let pushed = unsafe { std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32), sp - base) };
-        order.sort_pushed(pushed, |e| e.1);
-        sp
     }
 
     #[inline(always)]
@@ -134,7 +99,7 @@ impl<const W: usize> WideBvh<W> {
 
     /// `any`, adding the nodes and leaf groups it visits to `work`.
     #[inline(always)]
-    fn any_counted<const AVX: bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32) -> bool {
+    pub(super) fn any_counted<const AVX: bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32) -> bool {
         let mut hit = false;
         self.walk::<AVX, true, _>(ray, order, work, |_, _| {
             hit = true;
@@ -143,36 +108,64 @@ impl<const W: usize> WideBvh<W> {
         hit
     }
 
-    /// The child order for occlusion rays: whichever of farthest-first and
-    /// nearest-first visits fewer nodes and leaf groups over `ORDER_SAMPLE`
-    /// rays (spread over a batch) and the samples before it (`ORDER_DECAY`),
-    /// nearest first only by a margin (`ORDER_MARGIN`). Which order
-    /// finds occluders sooner depends on the scene (see `ChildOrder`); both
-    /// give the same answers. The sample costs about what tracing a batch
-    /// of 4096 shadow rays in packets costs 5 % of, so the choice is kept
-    /// and made again every `ORDER_REFRESH` batches of at least
-    /// `ORDER_MIN_BATCH` rays (smaller ones use the kept choice). Which
-    /// batch samples depends on the order threads call in, so the speed
-    /// may vary from run to run; the answers cannot.
-    #[inline(always)]
-    pub(super) fn any_order<const AVX: bool>(&self, rays: &[Ray]) -> ChildOrder {
-        use std::sync::atomic::Ordering::Relaxed;
-        let kept = self.any_order.load(Relaxed);
-        if rays.len() < ORDER_MIN_BATCH || self.root == EMPTY || (kept != 0 && self.order_calls.fetch_add(1, Relaxed) % ORDER_REFRESH != 0) {
-            return if kept == 2 { ChildOrder::NearestFirst } else { ChildOrder::FarthestFirst };
+    /// The child order for this tree's occlusion rays: whichever of
+    /// farthest first and nearest first visits fewer nodes and leaf groups
+    /// on `ORDER_SAMPLE` shadow-like rays, nearest first only by a margin
+    /// (`ORDER_MARGIN`). Which order finds occluders sooner depends on the
+    /// scene (see `ChildOrder`); both give the same answers.
+    ///
+    /// The sample is the tree's own: rays leaving triangles spread evenly
+    /// over its groups (from their centroids, on the side facing the
+    /// point) towards a point just under the top of the scene's box, where
+    /// lights usually are and where the benchmark's shadow rays go, each
+    /// ray's work weighted by its triangle's area: the points a camera or a
+    /// path reaches are spread by area, not by triangle. Against the work
+    /// of the benchmark's own shadow rays (256x192 camera hits), nearest ÷
+    /// farthest first, the weighted sample ÷ the shadow rays: cow 1.62 /
+    /// 1.79, maxplanck 0.995 / 0.980, beetle 0.975 / 1.068, CBbunny 1.026 /
+    /// 1.068, stadium:500k 0.637 / 0.851, grass:500k 0.238 / 0.718,
+    /// arch:100k 1.00 / 1.37, sphere:100k 1.00 / 1.00, subdiv:bunny:100k
+    /// 1.16 / 1.20: the same choice on every scene (unweighted, stadium's
+    /// finely cut tiers read 1.31 and chose farthest first). Chosen once,
+    /// when the tree is built, so that the same batch always takes the
+    /// same way; chosen per batch from the batches' own rays (every 16th
+    /// batch, the sums decaying), the choice depended on which thread's
+    /// batch came first.
+    pub(super) fn any_order_of(&self) -> ChildOrder {
+        let groups = &self.tree.groups;
+        if self.tree.root == EMPTY || groups.is_empty() {
+            return ChildOrder::FarthestFirst;
         }
-        let (mut far, mut near) = (0u32, 0u32);
+        let b = self.tree.bounds;
+        let light = glam::Vec3::new(b.center().x, b.max.y - 0.02 * b.extent().y, b.center().z);
+        let (mut far, mut near) = (0.0f64, 0.0f64);
         for k in 0..ORDER_SAMPLE {
-            let r = &rays[k * rays.len() / ORDER_SAMPLE];
-            if r.is_valid() {
-                self.any_counted::<AVX>(r, ChildOrder::FarthestFirst, &mut far);
-                self.any_counted::<AVX>(r, ChildOrder::NearestFirst, &mut near);
+            let gi = (k * groups.len() / ORDER_SAMPLE).min(groups.len() - 1);
+            let lane = k % LANES;
+            if self.tree.ids[gi * LANES + lane][0] == EMPTY {
+                continue;
+            }
+            let g = &groups[gi];
+            let v = |c: usize| glam::Vec3::new(g.v[c][0][lane], g.v[c][1][lane], g.v[c][2][lane]);
+            let (a, e1, e2) = (v(0), v(1) - v(0), v(2) - v(0));
+            let cross = e1.cross(e2);
+            let (n, area) = (cross.normalize_or_zero(), 0.5 * cross.length() as f64);
+            let p = a + (e1 + e2) / 3.0;
+            if n == glam::Vec3::ZERO || !p.is_finite() || !area.is_finite() {
+                continue;
+            }
+            let n = if n.dot(light - p) < 0.0 { -n } else { n };
+            let o = crate::sampling::offset_ray_origin(p, n, crate::sampling::magnitude(&[v(0), v(1), v(2)]));
+            let ray = Ray::with_range(o, light - o, 0.0, 1.0 - 1e-4);
+            if ray.is_valid() {
+                let (mut f, mut nf) = (0u32, 0u32);
+                self.any_counted::<false>(&ray, ChildOrder::FarthestFirst, &mut f);
+                self.any_counted::<false>(&ray, ChildOrder::NearestFirst, &mut nf);
+                far += area * f as f64;
+                near += area * nf as f64;
             }
         }
-        let (far, near) = (decayed_sum(&self.order_work[0], far, ORDER_DECAY), decayed_sum(&self.order_work[1], near, ORDER_DECAY));
-        let nearest = (near as u64) * ORDER_MARGIN.1 < (far as u64) * ORDER_MARGIN.0;
-        self.any_order.store(1 + nearest as u8, Relaxed);
-        if nearest {
+        if near * ORDER_MARGIN.1 < far * ORDER_MARGIN.0 {
             ChildOrder::NearestFirst
         } else {
             ChildOrder::FarthestFirst
@@ -188,8 +181,7 @@ impl<const W: usize> WideBvh<W> {
 
     #[inline(always)]
     pub(super) fn any_all<const AVX: bool>(&self, rays: &[Ray], out: &mut [bool]) {
-        let order = self.any_order::<AVX>(rays);
-        self.any_all_ordered::<AVX>(rays, out, order)
+        self.any_all_ordered::<AVX>(rays, out, self.policy.any_order)
     }
 
     #[inline(always)]
@@ -200,7 +192,7 @@ impl<const W: usize> WideBvh<W> {
     }
 
     // The same traversal compiled for AVX2: the box test's intrinsics inline
-    // only into functions built with the feature. Callers check `self.avx`.
+    // only into functions built with the feature. Callers check `self.policy.avx()`.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_all_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
@@ -212,65 +204,4 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn any_all_avx(&self, rays: &[Ray], out: &mut [bool]) {
         self.any_all::<true>(rays, out)
     }
-}
-
-/// The order a node's entered children are visited in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum ChildOrder {
-    /// Closest hit: nearest entry first, so later subtrees are culled by
-    /// the hit found.
-    NearestFirst,
-    /// Any hit, where it visits less than `NearestFirst` on a batch's
-    /// sample (`any_order`): farthest entry first. Shadow rays leave a surface, so
-    /// their nearest boxes hold that surface's own neighbourhood, which
-    /// they start just off; the occluder is usually farther along.
-    /// Measured against the tree's own order (the binary SAH's, last child
-    /// first), 1 thread, shadow Mrays/s single rays / 16-ray packets:
-    /// arch:200k 6.6 -> 11.1 / 1.7 -> 14.7 (99 % occluded), beetle 3.9 ->
-    /// 4.4 / 5.1 -> 6.2, cow 6.5 -> 6.6 / 8.6 -> 9.4, CBbunny, sphere:1M
-    /// and subdiv:bunny:500k unchanged; but stadium:200k 6.0 -> 5.2 / 6.8 ->
-    /// 6.0, grass:200k 0.49 -> 0.40 / 0.41 -> 0.37, maxplanck 3.5 -> 3.3
-    /// (occluders next to the origin). Path-traced renders unchanged
-    /// (CBbunny, CBgems 32 spp -m 5: 8.62-8.76 s either way). Nearest first
-    /// was worst (cow 6.7 -> 3.6).
-    ///
-    /// Hence the choice from a sample (`any_order`). With nearest first
-    /// for every batch, shadow packets (1 thread, Mrays/s) gained on
-    /// grass:500k 0.30-0.35 -> 0.40-0.42 and stadium:500k 13.1 -> 16.5-16.7
-    /// but lost on arch:500k (33-34 -> 6.3-6.9), cow (24 -> 14),
-    /// subdiv:bunny:500k (3.3 -> 2.0), CBbunny, beetle, maxplanck and
-    /// sphere:1M (4-15 %); choosing per batch from a sample, grass 0.42,
-    /// stadium 16.1, the rest within 2 % of farthest first (maxplanck's
-    /// samples split between the orders: 8.1-8.2 against 8.3). Sampling
-    /// every batch instead of every 16th cost 2-5 %.
-    FarthestFirst,
-}
-
-impl ChildOrder {
-    /// Sort children just pushed (entry distance `dist`) so that the one
-    /// this order visits next is on top, at the end.
-    #[inline(always)]
-    pub(super) fn sort_pushed<T: Copy>(self, pushed: &mut [T], dist: impl Fn(&T) -> f32) {
-        match self {
-            ChildOrder::NearestFirst => sort_far_first(pushed, dist),
-            ChildOrder::FarthestFirst => sort_far_first(pushed, |e| -dist(e)),
-        }
-    }
-}
-
-/// Pop stacked children until one whose entry distance is within `tmax`
-/// (a subtree starting beyond it cannot hold a closer hit); `None` when the
-/// stack runs out.
-#[inline(always)]
-pub(super) fn pop_within(stack: &[MaybeUninit<(u32, f32)>; STACK], sp: &mut usize, tmax: f32) -> Option<u32> {
-    while *sp > 0 {
-        *sp -= 1;
-        // SAFETY: every entry below the stack height was written.
-        let (code, dist) = unsafe { stack[*sp].assume_init() };
-        // Scaled as the box tests scale it (`Slab::test`).
-        if dist <= tmax * crate::accel::bvh::ROBUST_SCALE {
-            return Some(code);
-        }
-    }
-    None
 }

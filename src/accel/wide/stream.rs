@@ -21,7 +21,8 @@
 
 use super::kernels::{slab_planes, Slab};
 use super::triangle::Shear;
-use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT, STACK};
+use super::stack::WalkStack;
+use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
@@ -49,7 +50,7 @@ struct StreamRays {
 pub(super) const STREAM_MIN_BYTES: usize = 16 << 20;
 
 /// Which way a tree's occlusion batches go is fixed when it is built
-/// (`WideBvh::stream_shadows`): streams where its rays are expected to
+/// (`Policy::shadows`): streams where its rays are expected to
 /// miss the caches (the test that interleaves its incoherent closest-hit
 /// batches, `interleave_pays`), packets elsewhere. Neither way wins
 /// everywhere, and that test separates them (1 thread, shadow Mrays/s,
@@ -69,7 +70,7 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     pub(super) unsafe fn any_streams(&self, rays: &[Ray], out: &mut [bool], order: ChildOrder) {
         debug_assert!(W == 8);
-        if self.root & LEAF_BIT != 0 || self.root == EMPTY {
+        if self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
             return self.any_all_ordered::<true>(rays, out, order);
         }
         // Per octant, the indices of the rays waiting for a full stream.
@@ -121,14 +122,13 @@ impl<const W: usize> WideBvh<W> {
         let mut setup: u64 = 0;
         let mut rts: [MaybeUninit<RayTransform>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
         let mut shears: [MaybeUninit<Shear>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
-        // Stack of (node, the rays that entered it, their nearest entry).
-        let mut stack = super::CacheAligned([MaybeUninit::<(u32, f32, u64)>::uninit(); STACK]);
-        let stack = &mut stack.0;
+        // Stack of (node, the rays' nearest entry, the rays that entered it).
+        let mut stack = WalkStack::<u64>::new();
         let mut sp = 0;
-        let (mut code, mut entered) = (self.root, active);
+        let (mut code, mut entered) = (self.tree.root, active);
         let inf = _mm256_set1_ps(f32::INFINITY);
         loop {
-            let node = &self.nodes[code as usize];
+            let node = &self.tree.nodes[code as usize];
             let rows = node.bounds.as_ptr() as *const f32;
             // Spelled out, not `[0, 1, 2].map(..)`: see `RaysSoA::new_with`.
             let load = |p: usize| _mm256_load_ps(rows.add(p * W));
@@ -157,7 +157,7 @@ impl<const W: usize> WideBvh<W> {
             let none = _mm256_cmpeq_epi32(_mm256_or_si256(masks[0], masks[1]), _mm256_setzero_si256());
             let entered_children = !_mm256_movemask_ps(_mm256_castsi256_ps(none)) as u32 & 0xff;
             if entered_children == 0 {
-                match pop(stack, &mut sp, active) {
+                match stack.pop_where(&mut sp, |_, r| (r & active != 0).then_some(r)) {
                     Some(e) => (code, entered) = e,
                     None => return,
                 }
@@ -176,7 +176,7 @@ impl<const W: usize> WideBvh<W> {
                 b &= b - 1;
                 self.prefetch(node.child[lane]);
             }
-            let base = sp;
+            let mark = sp;
             let mut b = entered_children;
             while b != 0 {
                 let lane = b.trailing_zeros() as usize;
@@ -187,8 +187,7 @@ impl<const W: usize> WideBvh<W> {
                     continue;
                 }
                 if child & LEAF_BIT == 0 {
-                    stack[sp].write((child, child_near[lane], r));
-                    sp += 1;
+                    stack.push(&mut sp, child, child_near[lane], r);
                     continue;
                 }
                 // A leaf: the rays that entered it test its triangles.
@@ -222,8 +221,8 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             // The child `order` visits next on top (see `ChildOrder`).
-            order.sort_pushed(std::slice::from_raw_parts_mut(stack[base..sp].as_mut_ptr() as *mut (u32, f32, u64), sp - base), |e| e.1);
-            match pop(stack, &mut sp, active) {
+            stack.order_since(mark, sp, order);
+            match stack.pop_where(&mut sp, |_, r| (r & active != 0).then_some(r)) {
                 Some(e) => (code, entered) = e,
                 None => return,
             }
@@ -242,20 +241,6 @@ pub(super) fn ready(k: usize, setup: &mut u64, rts: &mut [MaybeUninit<RayTransfo
         shears[k].write(Shear::new(&rt));
         rts[k].write(rt);
     }
-}
-
-/// Pop the next node some still-unoccluded ray (`active`) entered, with
-/// the rays that entered it; `None` when the stack runs out.
-#[inline(always)]
-unsafe fn pop(stack: &[MaybeUninit<(u32, f32, u64)>; STACK], sp: &mut usize, active: u64) -> Option<(u32, u64)> {
-    while *sp > 0 {
-        *sp -= 1;
-        let (c, _, r) = stack[*sp].assume_init();
-        if r & active != 0 {
-            return Some((c, r));
-        }
-    }
-    None
 }
 
 #[cfg(test)]
@@ -341,7 +326,7 @@ mod tests {
         let mut bvh = WideBvh::<8>::build(&shapes);
         let want: Vec<bool> = rays.iter().map(|r| bvh.occluded(r)).collect();
         for streams in [false, true] {
-            bvh.stream_shadows = streams;
+            bvh.policy.shadows = if streams { super::super::policy::ShadowBatches::Streams } else { super::super::policy::ShadowBatches::Packets };
             let mut got = vec![false; rays.len()];
             bvh.occluded_coherent(&rays, &mut got);
             assert_eq!(got, want, "streams {streams}");

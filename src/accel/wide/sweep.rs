@@ -57,7 +57,8 @@
 //! kept at least that far from zero so its reciprocal is finite.
 
 use super::packet::{RaysSoA, PACKET};
-use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT, STACK};
+use super::stack::WalkStack;
+use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use std::mem::MaybeUninit;
@@ -262,7 +263,7 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     unsafe fn any_swept(&self, sw: &Sweep, soa: &RaysSoA, rays: &[Ray], out: &mut [bool], order: ChildOrder, which: u32) {
         let n = rays.len();
-        debug_assert!(W == 8 && n <= PACKET && self.root & LEAF_BIT == 0);
+        debug_assert!(W == 8 && n <= PACKET && self.tree.root & LEAF_BIT == 0);
         let mut tmax = [0.0f32; PACKET];
         tmax[..n].copy_from_slice(&soa.tmax[..n]);
         let mut active = which as u64;
@@ -281,11 +282,9 @@ impl<const W: usize> WideBvh<W> {
         let mut rts: [MaybeUninit<RayTransform>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut shears: [MaybeUninit<super::Shear>; PACKET] = [const { MaybeUninit::uninit() }; PACKET];
         let mut setup: u64 = 0;
-        // A cache-aligned frame (`CacheAligned`).
-        let mut stack = super::CacheAligned([MaybeUninit::<(u32, f32)>::uninit(); STACK]);
-        let stack = &mut stack.0;
+        let mut stack = WalkStack::<()>::new();
         let mut sp = 0;
-        let mut cur = self.root;
+        let mut cur = self.tree.root;
         let (mut wasted, mut useful) = (0u32, 0u32);
         loop {
             if wasted > super::frustum::WASTED_LEAF_TESTS && wasted > useful {
@@ -299,7 +298,7 @@ impl<const W: usize> WideBvh<W> {
                 }
                 return;
             }
-            let node = &self.nodes[cur as usize];
+            let node = &self.tree.nodes[cur as usize];
             let mut near = [0.0f32; W];
             let mask = sw.test::<W>(node, &mut near);
             let mut leaves = 0u32;
@@ -338,13 +337,12 @@ impl<const W: usize> WideBvh<W> {
             }
             let inner = mask & !leaves;
             if inner != 0 {
-                sp = self.push_children(node, inner, &near, stack, sp, order);
+                self.push_entered(&mut stack, &mut sp, node, inner, &near, order);
             }
-            if sp == 0 {
-                return;
+            match stack.pop_where(&mut sp, |_, ()| Some(())) {
+                Some((code, ())) => cur = code,
+                None => return,
             }
-            sp -= 1;
-            cur = stack[sp].assume_init().0;
         }
     }
 }
@@ -417,7 +415,7 @@ mod tests {
                     for w in [u16::MAX as u32, (rng.next_u32() & 0xffff) | 1] {
                         // SAFETY: as above.
                         let sw = Sweep::new(&unsafe { soa.ends_of(w) }, pad);
-                        for node in &bvh.nodes {
+                        for node in &bvh.tree.nodes {
                             let mut near = [0.0; 8];
                             // SAFETY: as above.
                             let got = unsafe { sw.test::<8>(node, &mut near) };
@@ -462,7 +460,7 @@ mod tests {
                 assert_eq!([e[0][a], e[1][a], e[2][a], e[3][a]], [lo(&starts), hi(&starts), lo(&ends), hi(&ends)]);
             }
             let tmax: [f32; PACKET] = std::array::from_fn(|i| p[i].tmax);
-            for node in &bvh.nodes {
+            for node in &bvh.tree.nodes {
                 for lane in 0..8 {
                     // SAFETY: as above.
                     let got = unsafe { soa.test_signed(node, lane, &tmax) };

@@ -72,12 +72,14 @@ fn every_width_and_instruction_set_matches_brute_force() {
     let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
     let want_occ: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
     let mut sse8 = WideBvh::<8>::build(&shapes);
-    let avx8_on = sse8.avx;
-    sse8.avx = false;
+    let avx8_on = sse8.policy.avx();
+    sse8.policy.boxes = policy::BoxIsa::Sse2;
     // Interleaved batches are only switched on for large structures;
     // force them here.
     let mut interleaved = WideBvh::<8>::build(&shapes);
-    interleaved.interleave = interleaved.avx;
+    if interleaved.policy.avx() {
+        interleaved.policy.closest = ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Interleaved };
+    }
     let mut candidates: Vec<(&str, Box<dyn Traversal>)> = vec![
         ("4-wide", Box::new(WideBvh::<4>::build(&shapes))),
         ("8-wide SSE2", Box::new(sse8)),
@@ -86,7 +88,7 @@ fn every_width_and_instruction_set_matches_brute_force() {
     ];
     if avx512_on() {
         let mut wide = WideBvh::<8>::build(&shapes);
-        wide.avx512 = true;
+        wide.policy.packets = policy::PacketIsa::Avx512;
         candidates.push(("8-wide AVX-512 packets", Box::new(wide)));
     } else {
         eprintln!("note: this CPU has no AVX-512F; the AVX-512 packet kernels were not exercised");
@@ -139,16 +141,20 @@ fn spatial_split_trees_match_brute_force() {
     let want_occ: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
     let plain = WideBvh::<8>::build_with_splits(&shapes, 0.0);
     let split = WideBvh::<8>::build_with_splits(&shapes, 0.5);
-    let refs = |b: &WideBvh<8>| b.ids.iter().filter(|id| id[0] != EMPTY).count() + b.spheres.len();
+    let refs = |b: &WideBvh<8>| b.tree.ids.iter().filter(|id| id[0] != EMPTY).count() + b.tree.spheres.len();
     assert!(refs(&split) > refs(&plain), "no spatial split was made ({} references)", refs(&split));
     assert!(refs(&split) as f64 <= 1.5 * refs(&plain) as f64, "past the budget: {} references for {}", refs(&split), refs(&plain));
     let mut candidates: Vec<(&str, WideBvh<8>)> = vec![("default", split)];
     let mut sse = WideBvh::<8>::build_with_splits(&shapes, 0.5);
-    sse.avx = false;
+    sse.policy.boxes = policy::BoxIsa::Sse2;
     candidates.push(("SSE2", sse));
     let mut interleaved = WideBvh::<8>::build_with_splits(&shapes, 0.5);
-    interleaved.interleave = interleaved.avx;
-    interleaved.stream_shadows = interleaved.avx;
+    if interleaved.policy.avx() {
+        interleaved.policy.closest = ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Interleaved };
+    }
+    if interleaved.policy.avx() {
+        interleaved.policy.shadows = policy::ShadowBatches::Streams;
+    }
     candidates.push(("interleaved, shadow streams", interleaved));
     for (name, b) in &candidates {
         assert_batches_match(name, b, &rays, &want, &want_occ);
@@ -166,7 +172,7 @@ fn simd_kernels_equal_the_scalar_fallback() {
     let mut rays = rays(&shapes);
     // Rays aimed at child-box corners, where entry and exit distances
     // meet and the far plane's rounding allowance decides.
-    for node in bvh.nodes.iter().take(300) {
+    for node in bvh.tree.nodes.iter().take(300) {
         for lane in 0..8 {
             if node.child[lane] == EMPTY {
                 continue;
@@ -184,7 +190,7 @@ fn simd_kernels_equal_the_scalar_fallback() {
         let rt = RayTransform::new(r.origin, r.dir);
         let shear = Shear::new(&rt);
         let tmax = if k % 3 == 0 { r.tmax } else { 2.0 };
-        for node in bvh.nodes.iter().skip(k % 7).step_by(7) {
+        for node in bvh.tree.nodes.iter().skip(k % 7).step_by(7) {
             let mut want = [0.0f32; 8];
             let m = slab.test_scalar(node, r.tmin, tmax, &mut want);
             let mut got = [0.0f32; 8];
@@ -199,7 +205,7 @@ fn simd_kernels_equal_the_scalar_fallback() {
             }
             boxes += 1;
         }
-        for g in bvh.groups.iter() {
+        for g in bvh.tree.groups.iter() {
             let (mut a, mut b) = ([LaneHit::default(); LANES], [LaneHit::default(); LANES]);
             let ma = intersect_group(g, &rt, &shear, r.tmin, tmax, &mut a);
             let mb = intersect_group_scalar(g, &rt, r.tmin, tmax, &mut b);
@@ -251,7 +257,7 @@ fn packet_box_test_equals_the_single_ray_test() {
     let mut packets = tight_packets(150, 21);
     // Packets aimed at box corners, where the far plane's rounding
     // allowance decides.
-    for node in bvh.nodes.iter().take(40) {
+    for node in bvh.tree.nodes.iter().take(40) {
         let hi = Vec3::new(node.bounds[3][0], node.bounds[4][0], node.bounds[5][0]);
         let o = hi + Vec3::new(0.31, 0.27, 0.43);
         packets.extend((0..packet::PACKET).map(|i| Ray::new(o, hi - o + Vec3::splat(1e-4 * i as f32))));
@@ -265,7 +271,7 @@ fn packet_box_test_equals_the_single_ray_test() {
         for (i, r) in p.iter().enumerate() {
             tmax[i] = if i % 3 == 0 { r.tmax } else { 0.5 + i as f32 * 0.2 };
         }
-        for node in &bvh.nodes {
+        for node in &bvh.tree.nodes {
             for lane in (0..8).filter(|&l| node.child[l] != EMPTY) {
                 // SAFETY: AVX2 checked above.
                 let got = unsafe { soa.test(&f.near_plane, node, lane, &tmax) } & ((1 << p.len()) - 1);
@@ -302,7 +308,7 @@ fn paired_triangle_test_equals_the_single_ray_test() {
     let mut rays: Vec<Ray> = rays(&shapes).into_iter().filter(|r| r.is_valid()).step_by(3).collect();
     // Rays through vertices, from axis-aligned origins so some edge
     // functions are exactly zero.
-    for g in bvh.groups.iter().step_by(40) {
+    for g in bvh.tree.groups.iter().step_by(40) {
         let v = Vec3::new(g.v[0][0][0], g.v[0][1][0], g.v[0][2][0]);
         rays.push(Ray::new(v + Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.0, 0.0, -1.0)));
         rays.push(Ray::new(v + Vec3::new(1.5, 0.0, 0.0), Vec3::new(-1.0, 0.0, 0.0)));
@@ -313,7 +319,7 @@ fn paired_triangle_test_equals_the_single_ray_test() {
         let sh = [0, 1].map(|r| Shear::new(&rt[r]));
         let tmin = [pair[0].tmin, pair[1].tmin];
         let tmax = [pair[0].tmax, 3.0];
-        for g in &bvh.groups {
+        for g in &bvh.tree.groups {
             let mut got = [[LaneHit::default(); LANES]; 2];
             // SAFETY: AVX2 checked above.
             let m2 = unsafe { triangle::intersect_group_x2(g, [&rt[0], &rt[1]], [&sh[0], &sh[1]], tmin, tmax, &mut got) };
@@ -414,13 +420,13 @@ fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
         pool.install(|| WideBvh::<8>::build(&shapes))
     };
     let (one, two) = (in_pool(1), in_pool(2));
-    assert!(one.nodes.len() > 1000 && !one.leaves.is_empty() && one.spheres.len() == 40, "{}", one.describe());
+    assert!(one.tree.nodes.len() > 1000 && !one.tree.leaves.is_empty() && one.tree.spheres.len() == 40, "{}", one.describe());
     let bits = |b: &WideBvh<8>| {
-        let mut v: Vec<u32> = b.nodes.iter().flat_map(|n| n.bounds.iter().flatten().map(|f| f.to_bits()).chain(n.child)).collect();
-        v.extend(b.groups.iter().flat_map(|g| g.v.iter().flatten().flatten().map(|f| f.to_bits())));
-        v.extend(b.ids.iter().flatten());
-        v.extend(b.leaves.iter().flat_map(|l| [l.group, l.n_groups, l.sphere, l.n_spheres]));
-        v.push(b.root);
+        let mut v: Vec<u32> = b.tree.nodes.iter().flat_map(|n| n.bounds.iter().flatten().map(|f| f.to_bits()).chain(n.child)).collect();
+        v.extend(b.tree.groups.iter().flat_map(|g| g.v.iter().flatten().flatten().map(|f| f.to_bits())));
+        v.extend(b.tree.ids.iter().flatten());
+        v.extend(b.tree.leaves.iter().flat_map(|l| [l.group, l.n_groups, l.sphere, l.n_spheres]));
+        v.push(b.tree.root);
         v
     };
     assert!(bits(&one) == bits(&two), "the layout depends on the thread count");
@@ -486,11 +492,13 @@ fn a_hit_at_exactly_tmax_is_found_in_every_mode() {
     let mut candidates: Vec<(&str, Box<dyn Traversal>)> =
         vec![("4-wide", Box::new(WideBvh::<4>::build(&shapes))), ("8-wide", Box::new(WideBvh::<8>::build(&shapes)))];
     let mut interleaved = WideBvh::<8>::build(&shapes);
-    interleaved.interleave = interleaved.avx;
+    if interleaved.policy.avx() {
+        interleaved.policy.closest = ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Interleaved };
+    }
     candidates.push(("8-wide interleaved", Box::new(interleaved)));
     if avx512_on() {
         let mut wide = WideBvh::<8>::build(&shapes);
-        wide.avx512 = true;
+        wide.policy.packets = policy::PacketIsa::Avx512;
         candidates.push(("8-wide AVX-512 packets", Box::new(wide)));
     }
     for (name, b) in &candidates {

@@ -241,7 +241,8 @@ fn throughput_rows(args: &BenchArgs, plan: &Plan, name: &str, scene: &Scene, bui
                 let (e, r) = e.map_or(("–".to_string(), "–".to_string()), |e| (format!("{e:.3}"), format!("{:.3}", total / e)));
                 let _ = write!(row, " {e} | {r} |");
             }
-            let _ = writeln!(t.sah, "| {} | {} | {:.3} | {:.3} | {:.3} |{row}", scene.name, kind, nodes, leaves, total);
+            let choices = a.choices().unwrap_or_else(|| "–".into());
+            let _ = writeln!(t.sah, "| {} | {} | {:.3} | {:.3} | {:.3} |{row} {choices} |", scene.name, kind, nodes, leaves, total);
         }
         let mem = a.memory_bytes() as f64;
         let _ = writeln!(
@@ -306,10 +307,11 @@ fn report(args: &BenchArgs, plan: &Plan, t: &Tables) -> Result<String> {
             md,
             "\nSAH cost of the native tree, counted as Embree's BVH statistics count it: \
              expected node visits + expected 4-triangle block tests per ray through the root box. Embree's total is read from its own \
-             statistics (a child `pathtracer bench` run with PATHTRACER_EMBREE_CONFIG=verbose=2, line `total : sah = ...`):\n"
+             statistics (a child `pathtracer bench` run with PATHTRACER_EMBREE_CONFIG=verbose=2, line `total : sah = ...`); \
+             the traversal choices the native build made for the tree:\n"
         );
-        let _ = writeln!(md, "| scene | backend | nodes | leaves | total | Embree 3 total | native ÷ Embree 3 | Embree 4 total | native ÷ Embree 4 |");
-        let _ = writeln!(md, "|---|---|---:|---:|---:|---:|---:|---:|---:|");
+        let _ = writeln!(md, "| scene | backend | nodes | leaves | total | Embree 3 total | native ÷ Embree 3 | Embree 4 total | native ÷ Embree 4 | choices |");
+        let _ = writeln!(md, "|---|---|---:|---:|---:|---:|---:|---:|---:|---|");
         md.push_str(&t.sah);
     }
     if !t.modes.is_empty() {

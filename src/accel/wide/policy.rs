@@ -1,0 +1,229 @@
+//! How a wide BVH is traversed: the instruction sets its kernels run, the
+//! way each kind of batch goes and the child order of any-hit rays. All of
+//! it is fixed when the tree is built ([`Policy::choose`]), from the build
+//! options, the CPU and the tree itself, and never changes afterwards: the
+//! same batch always takes the same way, whatever ran before it. Only the
+//! way a closest-hit batch goes may depend on the batch (`ClosestBatches`'
+//! `StreamsWhereCoherent`), and then on nothing but the batch's own rays.
+//! No choice changes an answer (every way gives the scalar code's bits).
+
+use super::stack::ChildOrder;
+use super::WideBvh;
+use crate::accel::{BatchWay, NativeIsa, NativeOptions, ShadowWay, Traversal};
+
+/// The instruction set of the box and triangle tests.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum BoxIsa {
+    /// 4 boxes per instruction (two instructions for 8): part of every
+    /// x86-64 CPU, and the scalar lane loops elsewhere.
+    Sse2,
+    /// 8 boxes per instruction: `W` = 8 on a CPU that has AVX2, unless the
+    /// options ask for SSE2.
+    Avx2,
+}
+
+/// The kernels of coherent packets (`frustum`, `leaf_rays`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum PacketIsa {
+    Avx2,
+    /// 16 rays per leaf box test, 4 rays per triangle group test; only when
+    /// asked for (see `avx512_available`).
+    Avx512,
+}
+
+/// How incoherent closest-hit batches (`intersect_batch`) go.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum ClosestBatches {
+    /// One ray at a time.
+    Single,
+    /// Several rays at a time (`interleave`): the tree is too large for
+    /// the caches, so traversal waits on memory.
+    Interleaved,
+    /// In streams (`hit_stream`).
+    Streams,
+    /// In streams where the batch's own rays start close together
+    /// (`streams_pay`), else `otherwise`.
+    StreamsWhereCoherent { otherwise: Otherwise },
+}
+
+/// `ClosestBatches::StreamsWhereCoherent`'s way for the other batches.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Otherwise {
+    Single,
+    Interleaved,
+}
+
+/// How coherent occlusion batches (`occluded_coherent`) go.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum ShadowBatches {
+    /// 16-ray packets (`frustum`, `sweep`, `masked`).
+    Packets,
+    /// Streams (`stream`): the tree is large and its rays miss the caches,
+    /// or the options ask for streams.
+    Streams,
+}
+
+/// Whether packets prefetch the leaves (and masked packets the nodes) they
+/// are about to enter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum PacketPrefetch {
+    Off,
+    /// Trees of at least `PACKET_PREFETCH_BYTES`.
+    On,
+}
+
+/// A tree's traversal choices; see the module's documentation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Policy {
+    pub(super) boxes: BoxIsa,
+    pub(super) packets: PacketIsa,
+    pub(super) closest: ClosestBatches,
+    pub(super) shadows: ShadowBatches,
+    pub(super) prefetch: PacketPrefetch,
+    /// The child order of any-hit traversals (`ChildOrder`), chosen from a
+    /// sample of shadow-like rays over the tree's own triangles
+    /// (`single::any_order_of`).
+    pub(super) any_order: ChildOrder,
+}
+
+/// Structures at least this large have packets prefetch what they enter;
+/// smaller ones stay in the caches, where the prefetches only cost issue
+/// slots and fill buffers. Measured (1 thread, Mrays/s, camera / shadow,
+/// prefetching against none, the same binary): on a 16-core Xeon
+/// (Emerald Rapids) CBbunny (1.8 MiB) 32.8-33.1 / 16.5-16.8 against 34.2 /
+/// 17.5, beetle 42.4-43.9 / 11.7 against 45.0 / 12.3, maxplanck (3.5 MiB)
+/// 22.0-22.4 / 6.0-6.1 against 23.3 / 5.9; on a 2-vCPU AMD EPYC within
+/// 2 % either way. But the 1M-triangle sphere (65 MiB) 18.1-18.7 / 3.5
+/// against 14.7 / 2.6 and subdivided bunny (121 MiB) 18.5-18.9 / 3.3-3.5
+/// against 16.8 / 3.1 need them. Single rays keep prefetching everywhere:
+/// on small trees it is worth 3-6 % of random rays on the EPYC and on the
+/// Xeon's maxplanck (CBbunny there: 3 % the other way).
+const PACKET_PREFETCH_BYTES: usize = 16 << 20;
+
+impl Policy {
+    /// The policy for a freshly built `tree` (whose own policy is not read)
+    /// under `options` on this CPU.
+    pub(super) fn choose<const W: usize>(tree: &WideBvh<W>, options: &NativeOptions) -> Policy {
+        let avx = W == 8 && avx_available_for(options.isa);
+        let boxes = if avx { BoxIsa::Avx2 } else { BoxIsa::Sse2 };
+        let packets = if W == 8 && avx512_available(options.isa) { PacketIsa::Avx512 } else { PacketIsa::Avx2 };
+        let interleave = avx && tree.interleave_pays();
+        let streams = avx && W == 8;
+        let otherwise = if interleave { Otherwise::Interleaved } else { Otherwise::Single };
+        let closest = match options.batch {
+            BatchWay::Auto if streams => ClosestBatches::StreamsWhereCoherent { otherwise },
+            BatchWay::Auto if interleave => ClosestBatches::Interleaved,
+            BatchWay::Streams if streams => ClosestBatches::Streams,
+            BatchWay::Interleaved if avx => ClosestBatches::Interleaved,
+            _ => ClosestBatches::Single,
+        };
+        let stream_shadows = avx
+            && match options.shadow {
+                ShadowWay::Auto => interleave && tree.memory_bytes() >= super::STREAM_MIN_BYTES,
+                ShadowWay::Streams => true,
+                ShadowWay::Packets => false,
+            };
+        Policy {
+            boxes,
+            packets,
+            closest,
+            shadows: if stream_shadows { ShadowBatches::Streams } else { ShadowBatches::Packets },
+            prefetch: if tree.memory_bytes() >= PACKET_PREFETCH_BYTES { PacketPrefetch::On } else { PacketPrefetch::Off },
+            any_order: tree.any_order_of(),
+        }
+    }
+
+    /// Whether the AVX2 kernels run (the CPU has AVX2: `unsafe` AVX2 code
+    /// may be called when this is true).
+    #[inline(always)]
+    pub(super) fn avx(&self) -> bool {
+        self.boxes == BoxIsa::Avx2
+    }
+
+    /// Whether the AVX-512 packet kernels run (the CPU has AVX-512F).
+    #[inline(always)]
+    pub(super) fn avx512(&self) -> bool {
+        self.boxes == BoxIsa::Avx2 && self.packets == PacketIsa::Avx512
+    }
+
+    /// The policy's words for a tree's summary line: "AVX2, shadow packets,
+    /// any hit farthest first".
+    pub(super) fn describe(&self) -> String {
+        let isa = match (self.boxes, self.avx512()) {
+            (_, true) => "AVX2, AVX-512 packets",
+            (BoxIsa::Avx2, false) => "AVX2",
+            (BoxIsa::Sse2, false) => "SSE2",
+        };
+        let shadows = match self.shadows {
+            ShadowBatches::Packets => "shadow packets",
+            ShadowBatches::Streams => "shadow streams",
+        };
+        let order = match self.any_order {
+            ChildOrder::FarthestFirst => "any hit farthest first",
+            ChildOrder::NearestFirst => "any hit nearest first",
+        };
+        format!("{isa}, {shadows}, {order}")
+    }
+}
+
+/// The SIMD level native traversal runs at on this CPU with `isa`: "AVX2",
+/// "AVX2, AVX-512 packets" or "SSE2".
+pub fn simd_level(isa: NativeIsa) -> &'static str {
+    if avx512_available(isa) {
+        "AVX2, AVX-512 packets"
+    } else if avx_available_for(isa) {
+        "AVX2"
+    } else {
+        "SSE2"
+    }
+}
+
+/// Whether this CPU runs the AVX2 box test.
+pub(super) fn avx_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Whether a tree built with `isa` runs the AVX2 kernels.
+fn avx_available_for(isa: NativeIsa) -> bool {
+    isa != NativeIsa::Sse2 && avx_available()
+}
+
+/// Whether to run the AVX-512 packet kernels: only when asked for
+/// (`NativeIsa::Avx512Packets`, `PATHTRACER_NATIVE_ISA=avx512` on the
+/// command line) and the CPU has AVX-512F. Not the
+/// default, by measurement (1 thread, Mrays/s, AVX2 against AVX-512, three
+/// runs each, medians): on a 2-vCPU AMD EPYC (Zen 5) within
+/// noise on every scene (cow camera 65.8/65.4, CBbunny shadow 22.3/23.0,
+/// 1M sphere camera 29.1/29.0); on a 16-vCPU Intel Xeon the 1M
+/// camera rays lost 30 % (18.9 against 13.2), likely the lower clock Intel
+/// CPUs run AVX-512 code at.
+fn avx512_available(isa: NativeIsa) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        isa == NativeIsa::Avx512Packets && avx_available() && is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+impl Policy {
+    /// What a tree holds while its policy is being chosen: the scalar
+    /// traversals only, which is all `choose` runs.
+    pub(super) const PROVISIONAL: Policy = Policy {
+        boxes: BoxIsa::Sse2,
+        packets: PacketIsa::Avx2,
+        closest: ClosestBatches::Single,
+        shadows: ShadowBatches::Packets,
+        prefetch: PacketPrefetch::Off,
+        any_order: ChildOrder::FarthestFirst,
+    };
+}
