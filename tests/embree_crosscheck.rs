@@ -63,19 +63,9 @@ fn cross_check(scene: &Scene, native: &dyn Traversal, embree: &dyn Traversal, ra
         .map(|(i, r)| {
             let (n, e) = (native.intersect(r), embree.intersect(r));
             let (tie, widened, err) = compare(scene, i, r, n, e, native.occluded(r), embree.occluded(r));
-            // Occlusion on a segment ending before the closest hit, by more
-            // than the f32 uncertainty of t (rays starting a few ulps from a
-            // surface have a t that neither backend knows to 0.1 %).
-            let err = err.or_else(|| {
-                let h = n?;
-                let margin = (h.t * 1e-3).max(4.0 * agreement::error_bounds(scene, r, &h).1);
-                if h.t - margin <= r.tmin {
-                    return None;
-                }
-                let s = Ray { tmax: h.t - margin, ..*r };
-                let (a, b) = (native.occluded(&s), embree.occluded(&s));
-                (a != b).then(|| format!("ray {i} {s:?} shortened (closest {n:?}): occluded native {a} embree {b}"))
-            });
+            // Occlusion on a segment ending before the closest hit, every
+            // disagreement counted (no occluder ties on the shipped scenes).
+            let err = err.or_else(|| agreement::compare_occlusion(scene, r, n, native, embree, agreement::OccluderTies::Refused).map(|e| format!("ray {i} {r:?} (closest {n:?}): {e}")));
             (n.is_some(), tie, widened, err)
         })
         .collect();

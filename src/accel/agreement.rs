@@ -114,11 +114,22 @@ pub fn compare(scene: &Scene, r: &Ray, a: Option<Hit>, b: Option<Hit>) -> Agreem
     }
 }
 
+/// Whether `compare_occlusion` lets an occluder within f32 of the closest
+/// hit's distance pass as a tie.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OccluderTies {
+    /// Any scene (a user's, with nearly coplanar neighbours along edges).
+    Allowed,
+    /// The shipped scenes, where no such ray has been found: every
+    /// disagreement is reported.
+    Refused,
+}
+
 /// Compare the occlusion answers of `a` and `b` for `r`, and for `r`
 /// shortened to end before its closest hit `hit` (by more than the f32
 /// uncertainty of t: rays starting a few ulps from a surface have a t that
 /// neither backend knows to 0.1 %).
-pub fn compare_occlusion(scene: &Scene, r: &Ray, hit: Option<Hit>, a: &dyn Traversal, b: &dyn Traversal) -> Option<String> {
+pub fn compare_occlusion(scene: &Scene, r: &Ray, hit: Option<Hit>, a: &dyn Traversal, b: &dyn Traversal, ties: OccluderTies) -> Option<String> {
     let (oa, ob) = (a.occluded(r), b.occluded(r));
     if oa != ob {
         return Some(format!("occluded {oa} against {ob}"));
@@ -138,7 +149,7 @@ pub fn compare_occlusion(scene: &Scene, r: &Ray, hit: Option<Hit>, a: &dyn Trave
     // nearly coplanar neighbours along an edge): the tie rule of `compare`,
     // with both triangles' bounds.
     let o = if oa { a.intersect(&s) } else { b.intersect(&s) };
-    if let Some(o) = o {
+    if let Some(o) = o.filter(|_| ties == OccluderTies::Allowed) {
         let bound = error_bounds(scene, r, &o).1.max(error_bounds(scene, r, &h).1) / grazing(scene, r, &o).min(grazing(scene, r, &h));
         if h.t - o.t <= bound {
             return None;

@@ -147,7 +147,7 @@ pub fn compare_backends(name: &str, scene: &Scene, reference: &dyn Traversal, ot
                     }
                     _ => None,
                 };
-                let extra = extra.or_else(|| agreement::compare_occlusion(scene, r, a, reference, other));
+                let extra = extra.or_else(|| agreement::compare_occlusion(scene, r, a, reference, other, agreement::OccluderTies::Allowed));
                 (verdict, extra)
             })
             .collect();
