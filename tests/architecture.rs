@@ -5,6 +5,8 @@
 //! imports are its `use crate::…`/`use super::…` lines and the `crate::…`
 //! paths in its code, test modules left out.
 
+mod common;
+
 use regex::Regex;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -20,28 +22,20 @@ fn src() -> PathBuf {
 /// `a::b`, `src/lib.rs` the crate root.
 fn modules() -> BTreeMap<Module, PathBuf> {
     let mut out = BTreeMap::new();
-    let mut stack = vec![src()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-                continue;
-            }
-            let name = p.file_name().unwrap().to_string_lossy().to_string();
-            if !name.ends_with(".rs") || name == "tests.rs" || name.ends_with("_tests.rs") {
-                continue;
-            }
-            let rel = p.strip_prefix(src()).unwrap().with_extension("");
-            let mut parts: Module = rel.components().map(|c| c.as_os_str().to_string_lossy().to_string()).collect();
-            if parts == ["main"] {
-                continue;
-            }
-            if parts.last().is_some_and(|l| l == "mod" || l == "lib") {
-                parts.pop();
-            }
-            out.insert(parts, p);
+    for p in common::files_under(&src()) {
+        let name = p.file_name().unwrap().to_string_lossy().to_string();
+        if !name.ends_with(".rs") || name == "tests.rs" || name.ends_with("_tests.rs") {
+            continue;
         }
+        let rel = p.strip_prefix(src()).unwrap().with_extension("");
+        let mut parts: Module = rel.components().map(|c| c.as_os_str().to_string_lossy().to_string()).collect();
+        if parts == ["main"] {
+            continue;
+        }
+        if parts.last().is_some_and(|l| l == "mod" || l == "lib") {
+            parts.pop();
+        }
+        out.insert(parts, p);
     }
     out
 }

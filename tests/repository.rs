@@ -4,6 +4,8 @@
 //! issues or borrowed machines: a measurement names its date, commit and
 //! CPU). The documented commands run from a fresh clone in `tests/docs.rs`.
 
+mod common;
+
 use regex::Regex;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -132,20 +134,13 @@ fn the_scenes_are_the_files_their_provenance_page_names() {
     }
     assert_eq!(listed.iter().filter(|p| p.extension().is_some_and(|x| x == "dae")).count(), 20, "the 20 CS184 scenes");
     assert_eq!(listed.iter().filter(|p| p.extension().is_some_and(|x| x == "exr")).count(), 4, "the 4 environment maps");
-    let mut stack = vec![root().join("scenes")];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-                continue;
-            }
-            let rel = p.strip_prefix(root()).unwrap().to_path_buf();
-            let name = rel.file_name().unwrap().to_string_lossy();
-            if name == "README.md" || name.starts_with("LICENSE") {
-                continue;
-            }
-            assert!(listed.contains(&rel), "{} is not on scenes/README.md", rel.display());
+    for p in common::files_under(&root().join("scenes")) {
+        let rel = p.strip_prefix(root()).unwrap().to_path_buf();
+        let name = rel.file_name().unwrap().to_string_lossy();
+        if name == "README.md" || name.starts_with("LICENSE") {
+            continue;
         }
+        assert!(listed.contains(&rel), "{} is not on scenes/README.md", rel.display());
     }
 }
+

@@ -257,3 +257,22 @@ pub fn sun_sky(sun: Vec3) -> std::sync::Arc<pathtracer::light::environment::EnvM
     }
     std::sync::Arc::new(pathtracer::light::environment::EnvMap::from_texels("sun sky".into(), w, h, t))
 }
+
+/// Every file under `dir`, at any depth, sorted (for checks that walk the
+/// repository: its modules, its scenes).
+pub fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap_or_else(|e| panic!("{}: {e}", d.display())) {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}

@@ -102,24 +102,22 @@ fn timed_passes(accels: &[&dyn Traversal], rays: &[Ray], kind: RayKind, threads:
 /// from 1 to 2 threads for native and 1.98x for Embree in one run.
 fn trace_pass(accel: &dyn Traversal, rays: &[Ray], kind: RayKind) {
     rays.par_chunks(4096).with_max_len(1).for_each(|chunk| match kind {
-        RayKind::Shadow => {
+        RayKind::Shadow | RayKind::ShadowIncoherent => {
             let mut out = vec![false; chunk.len()];
-            accel.occluded_coherent(chunk, &mut out);
+            if kind == RayKind::Shadow {
+                accel.occluded_coherent(chunk, &mut out);
+            } else {
+                accel.occluded_batch(chunk, &mut out);
+            }
             std::hint::black_box(&out);
         }
-        RayKind::ShadowIncoherent => {
-            let mut out = vec![false; chunk.len()];
-            accel.occluded_batch(chunk, &mut out);
-            std::hint::black_box(&out);
-        }
-        RayKind::Camera => {
+        RayKind::Camera | RayKind::Random => {
             let mut out = vec![None; chunk.len()];
-            accel.intersect_coherent(chunk, &mut out);
-            std::hint::black_box(&out);
-        }
-        RayKind::Random => {
-            let mut out = vec![None; chunk.len()];
-            accel.intersect_batch(chunk, &mut out);
+            if kind == RayKind::Camera {
+                accel.intersect_coherent(chunk, &mut out);
+            } else {
+                accel.intersect_batch(chunk, &mut out);
+            }
             std::hint::black_box(&out);
         }
         RayKind::Single => {

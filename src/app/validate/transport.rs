@@ -55,6 +55,8 @@ const ALPHA: f64 = 0.01;
 pub const TOLERANCE: f64 = 0.02;
 /// ... or of this fraction of the whole frame's mean, where larger.
 const FLOOR: f64 = 0.1;
+/// Why an optional comparison that cannot decide does not hold the verdict.
+const COVERED: &str = "the other comparisons cover what it tests";
 
 /// One way of estimating the image: renders it with a seed and a sample
 /// count.
@@ -171,7 +173,7 @@ pub fn compare_estimators(name: &str, a: &Estimator, b: &Estimator, budget: Dura
     let cannot = |spp_needed: f64, per_spp: f64, seconds: f64| {
         let need = spp_needed * per_spp + seconds;
         let status = if optional { Status::Skipped } else { Status::Unresolved };
-        Check { seconds, ..Check::new(name, status, format!("the budget's share ({total:.1} s) cannot decide it: about {need:.0} s would (a --budget {:.0} times larger){}", (need / total).max(1.0).ceil(), if optional { "; the other comparisons cover what it tests" } else { "" })) }
+        Check { seconds, ..Check::new(name, status, format!("the budget's share ({total:.1} s) cannot decide it: about {need:.0} s would (a --budget {:.0} times larger){}", (need / total).max(1.0).ceil(), if optional { format!("; {COVERED}") } else { String::new() })) }
     };
     let left = |start: Instant| total - start.elapsed().as_secs_f64();
     let spp = ((left(start) / (cost_a + cost_b)).floor() as u32).min(4096);
@@ -220,7 +222,7 @@ pub fn compare_estimators(name: &str, a: &Estimator, b: &Estimator, budget: Dura
         if optional {
             // The pilot underestimated it; what it tests is covered by the
             // other comparisons, so it does not hold the verdict.
-            let line = format!("{} of {} tests could not tell within the budget's share ({total:.1} s): {more}; the other comparisons cover what it tests ({setting}); first: {}", tests.undecided.len(), regions * 3, tests.undecided[0]);
+            let line = format!("{} of {} tests could not tell within the budget's share ({total:.1} s): {more}; {COVERED} ({setting}); first: {}", tests.undecided.len(), regions * 3, tests.undecided[0]);
             let mut details: Vec<String> = tests.undecided;
             details.extend(tests.details);
             return Check { name: name.into(), status: Status::Skipped, summary: line, details, seconds };
