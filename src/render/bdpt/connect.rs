@@ -127,3 +127,32 @@ impl Bdpt<'_> {
         done(value, Some(z.it.spawn_ray_to(y.offset_toward(z.p()))), None, None)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+    use crate::light::Lights;
+    use crate::render::bdpt::Technique;
+    use crate::render::Region;
+    use crate::sampler::SamplerKind;
+
+    /// Light tracing (t = 1) after an emission sample that failed (a
+    /// direction of zero density on an environment map ends the light
+    /// subpath before its first vertex) contributes nothing, for every s,
+    /// instead of reading past the empty subpath.
+    #[test]
+    fn light_tracing_from_an_empty_light_subpath_contributes_nothing() {
+        let scene = crate::scene::builtin::load().unwrap();
+        let lights = Lights::from_scene(&scene).unwrap();
+        let camera = Camera::from_scene(&scene);
+        let (w, h) = (camera.screen_w, camera.screen_h);
+        for technique in [Technique::LightTracing, Technique::Bidirectional] {
+            let bdpt = Bdpt::new(&scene, &lights, &camera, w, h, Region { x: 0, y: 0, w, h }, 5, true, technique).unwrap();
+            let mut sampler = Sampler::for_pixel(SamplerKind::Independent, 1, 0, 0, 1);
+            for s in 1..=3 {
+                assert!(bdpt.connect(&[], &[], s, 1, &mut sampler).is_none(), "{technique:?}, s = {s}");
+            }
+        }
+    }
+}
