@@ -77,7 +77,7 @@ TIERS = {
         radiance("CBempty.dae", 1, ALL),
         radiance("CBempty.dae", 3, BOTH),
         radiance("CBbunny.dae", 5, BOTH),
-        radiance("bunny.dae", 3, ["cycles"], label="hemisphere light"),
+        radiance("bunny.dae", 3, BOTH, label="hemisphere light"),
         adaptive(CB, 5, BOTH, 64, 0.05, 24),
         radiance("hard_offset.dae", 3, BOTH, label="hard case: moved by 8192", ref_shift="normalise"),
         radiance("hard_tiny.dae", 3, BOTH, label="hard case: scaled by 1e-3", ref_shift="normalise"),

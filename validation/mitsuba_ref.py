@@ -21,7 +21,9 @@ focal plane). The environment map = `envmap` after two exact fixes: Mitsuba's la
 other handedness (the map is flipped left-right and turned 90 degrees about +y) and puts rows
 at v = j/(H-1) (the map is resampled to 2H+1 rows that reproduce our clamped bilinear lookup);
 before rendering, Mitsuba's own lookup is compared with ours in 4096 directions, and a
-mismatch refuses the scene.
+mismatch refuses the scene. The hemisphere light (L for y > 0) is the same envmap over texels
+that are L above the horizon and 0 below (`hemisphere_texels`: exact but for a ramp 0.022
+degrees wide across the horizon, symmetric about it).
 
 `--integrator ptracer` renders with Mitsuba's particle tracer instead (the same max_depth and
 Russian roulette): the reference for our light tracer (`--integrator light`), which like it
@@ -78,6 +80,22 @@ def mitsuba_envmap(tex, out_path):
     # l = to_world^-1 d = (-d.z, d.y, d.x)
     m = mi.ScalarTransform4f([[0, 0, 1, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, 0, 0, 1]])
     return {"type": "envmap", "filename": out_path, "to_world": m, "scale": 1.0}
+
+
+HEMISPHERE_ROWS = 8192
+
+
+def hemisphere_texels(radiance):
+    """Our hemisphere light (radiance L for y > 0, none below) as lat-long texels for
+    `mitsuba_envmap`: HEMISPHERE_ROWS rows (16 columns: it does not vary with phi), L in the
+    upper half, 0 in the lower. Looked up bilinearly, the step at the horizon becomes a ramp
+    one row high (pi/8192, 0.022 degrees) centred on it, symmetric: what it adds below the
+    horizon it takes above, so irradiance differs from the step's only in the second order of
+    the ramp's width (a relative 1e-7 on a surface facing the horizon, below any test's
+    resolution)."""
+    tex = np.zeros((HEMISPHERE_ROWS, 16, 3))
+    tex[: HEMISPHERE_ROWS // 2] = np.array([float(x) for x in radiance])
+    return tex
 
 
 def check_envmap(scene, tex):
@@ -170,10 +188,18 @@ def scene_dict(spec, folder, max_depth, integrator="path"):
         elif t == "directional":
             d[f"light{i}"] = {"type": "directional", "direction": [-x for x in l["to_light"]], "irradiance": rgb(l["irradiance"])}
         elif t == "hemisphere":
-            refuse("hemisphere light (radiance over y > 0 only): Mitsuba's constant emitter covers the whole sphere")
+            if [float(x) for x in l["up"]] != [0.0, 1.0, 0.0]:
+                refuse("hemisphere light around an axis other than +y")
+            if "_env_texels" in d:
+                refuse("a hemisphere light and an environment map together (Mitsuba takes one environment)")
+            tex = hemisphere_texels(l["radiance"])
+            d[f"light{i}"] = mitsuba_envmap(tex, os.path.join(folder, "hemisphere_mitsuba.exr"))
+            d["_env_texels"] = tex
         elif t == "rect":
             refuse("rectangle light that rays cannot hit: every Mitsuba emitter shape also occludes")
         elif t == "environment":
+            if "_env_texels" in d:
+                refuse("a hemisphere light and an environment map together (Mitsuba takes one environment)")
             tex = np.array(mi.Bitmap(os.path.join(folder, l["file"])), dtype=np.float64)[..., :3]
             d[f"light{i}"] = mitsuba_envmap(tex, os.path.join(folder, "environment_mitsuba.exr"))
             d["_env_texels"] = tex
