@@ -1,16 +1,21 @@
 #!/usr/bin/env bash
 # Regenerates the README's three headline tables, and the evidence pages they summarise, from
 # one commit on one machine, so that every table names the same commit and CPU:
+#   0. the references' images for both tiers into the harness's cache (validation/warm_cache.py;
+#      nothing timed, and nothing to do where an earlier run left them);
 #   1. speed of traversal: `pathtracer bench` with the peers (scripts/bench-readme.sh) into
 #      docs/benchmarks/bench.md and .csv, and the README's bench table;
-#   2. error at equal time: the harness's full tier twice (validation/run full), then
-#      validation/speed_vs_error.py over both runs into docs/validation/speed-vs-error.{md,csv}
-#      and the README's table (path tracer, BDPT and light tracing rows);
-#   3. correctness: the harness's quick tier, its verdicts into the README and
+#   2. error at equal time: the harness's full tier twice with the native backend (the README's
+#      error table is native's; the Embree backends render the same images, and the bench times
+#      their traversal), then validation/speed_vs_error.py over both runs into
+#      docs/validation/speed-vs-error.{md,csv} and the README's table;
+#   3. correctness: the harness's quick tier with every backend, its verdicts into the README and
 #      docs/validation/README.md (validation/verdict_summary.py).
 # Refuses a tree with uncommitted changes (the tables must name a commit that reproduces them)
-# and checks at the end that the commit did not change under it. Takes about two and a half
-# hours on 2 cores; run it on a quiet machine. Commit the changed files afterwards.
+# and checks at the end that the commit did not change under it. On 2 cores: about 50 minutes
+# of bench, 40 of each full-tier run and 10 of quick tier once the references are cached (about
+# an hour more to render them after the exporters change: step 0, which may run earlier, on
+# its own). Run it on a quiet machine. Commit the changed files afterwards.
 #
 #   scripts/refresh-headlines.sh [--skip-bench] [--skip-error] [--skip-verdicts]
 set -euo pipefail
@@ -21,6 +26,11 @@ skip=" $* "
 runs="$(mktemp -d)"
 trap 'rm -rf "$runs"' EXIT
 
+echo "== 0/3 the references' images (validation/warm_cache.py) =="
+bash validation/setup
+cargo build --release -q
+validation/.venv/bin/python validation/warm_cache.py full
+validation/.venv/bin/python validation/warm_cache.py quick
 if [[ "$skip" != *" --skip-bench "* ]]; then
     echo "== 1/3 bench (scripts/bench-readme.sh) =="
     bash scripts/bench-readme.sh
@@ -28,7 +38,7 @@ fi
 if [[ "$skip" != *" --skip-error "* ]]; then
     for i in 1 2; do
         echo "== 2/3 full tier, run $i of 2 =="
-        bash validation/run full || true   # the verdicts are read from summary.json below
+        bash validation/run full --backends native || true   # the verdicts are read from summary.json below
         cp validation/out/summary.json "$runs/full-$i.json"
     done
     validation/.venv/bin/python validation/speed_vs_error.py "$runs/full-1.json" "$runs/full-2.json" \

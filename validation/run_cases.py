@@ -451,18 +451,22 @@ class Harness:
     def getref(self, rname, ref_dir, key, m):
         return getattr(self, rname)(ref_dir, key, m)
 
-    def run_geometry(self, case, results):
-        name = os.path.splitext(os.path.basename(case["scene"]))[0]
-        cid = f"{name}_geometry"
-        folder = self.fresh(cid)
-        scene_args, key, sc = self.export(case, folder)
-        # POV-Ray: one ray through each pixel centre, as ours at -s 1.
+    def pov_geometry(self, sc, key):
+        """POV-Ray's object ids and depths: one ray through each pixel centre, as ours at -s 1."""
         pov = {}
         for mode in ("object-id", "depth"):
             p = os.path.join(self.cache, f"pov_{key}_{mode}.exr")
             if not os.path.exists(p):
                 sh([sys.executable, os.path.join(HERE, "pov_ref.py"), sc, "--mode", mode, "--out", p])
             pov[mode] = read_exr(p)
+        return pov
+
+    def run_geometry(self, case, results):
+        name = os.path.splitext(os.path.basename(case["scene"]))[0]
+        cid = f"{name}_geometry"
+        folder = self.fresh(cid)
+        scene_args, key, sc = self.export(case, folder)
+        pov = self.pov_geometry(sc, key)
         # Depths of a normalised reference scene are in its units.
         pov["depth"] = pov["depth"] / self.ref_scale
         # Cycles: pixel averages over the box filter, independent renders.
