@@ -7,6 +7,7 @@
 use crate::accel::{self, BackendKind};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+#[cfg(has_embree)]
 use crate::ray::Ray;
 use crate::light::Lights;
 use crate::render::{self, path::{specular_guide::{self, SpecularGuide}, PathTracer}, RenderSettings};
