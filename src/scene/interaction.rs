@@ -4,7 +4,7 @@
 use super::{Scene, Shape};
 use crate::ray::Hit;
 use crate::geometry::{intersect_triangle, RayTransform};
-use crate::sampling::{magnitude, offset_ray_origin, ulp};
+use crate::sampling::{magnitude, spawn_origin, ulp};
 use crate::ray::Ray;
 use glam::Vec3;
 
@@ -22,6 +22,15 @@ pub struct Interaction {
     /// Largest coordinate magnitude of the primitive hit: the scale of the
     /// hit point's rounding error, which spawned rays step over.
     pub magnitude: f32,
+    /// The distance from `p` to its primitive's nearest edge, within its
+    /// plane (infinite on a sphere, 0 where unknown): how far a spawned ray
+    /// may move along itself before it could pass an edge where another
+    /// surface meets this one (`sampling::spawn_origin`).
+    pub edge_room: f32,
+    /// The side of `ng` the ray that found this point came from: +1 in
+    /// front, −1 behind, 0 unknown. A spawned ray leaving to that side
+    /// reflects; one leaving to the other side is transmitted.
+    pub incoming_side: f32,
     pub geom_id: u32,
     pub prim_id: u32,
 }
@@ -39,7 +48,7 @@ impl Interaction {
     /// `Traversal::exact_barycentrics`): recomputing them then gives the
     /// same bits, at the cost of a triangle test per hit.
     pub fn with_barycentrics(scene: &Scene, ray: &Ray, hit: &Hit, exact: bool) -> Self {
-        let (p, ng, ns, magnitude) = match &scene.shapes[hit.geom_id as usize] {
+        let (p, ng, ns, magnitude, edge_room) = match &scene.shapes[hit.geom_id as usize] {
             Shape::Mesh(m) => {
                 let tri = m.triangles[hit.prim_id as usize];
                 let [a, b, c] = tri.map(|i| m.positions[i as usize]);
@@ -65,14 +74,24 @@ impl Interaction {
                 let ng = cross.normalize_or_zero().as_vec3();
                 let [na, nb, nc] = tri.map(|i| m.normals[i as usize]);
                 let ns = (na * w + nb * u + nc * v).normalize_or_zero();
-                (p, ng, if ns == Vec3::ZERO { ng } else { ns }, mag)
+                // A vertex's barycentric is its distance to the opposite edge
+                // over that edge's height (twice the area over its length).
+                let room = [(w, b, c), (u, c, a), (v, a, b)]
+                    .iter()
+                    .map(|&(bary, q, r)| {
+                        let edge = (r - q).length();
+                        if edge > 0.0 { bary.max(0.0) * twice_area / edge } else { 0.0 }
+                    })
+                    .fold(f32::INFINITY, f32::min);
+                (p, ng, if ns == Vec3::ZERO { ng } else { ns }, mag, if room.is_finite() { room } else { 0.0 })
             }
             Shape::Sphere { center, radius } => {
                 let n = (ray.at(hit.t) - *center).normalize_or_zero();
-                (*center + n * *radius, n, n, center.abs().max_element() + radius)
+                (*center + n * *radius, n, n, center.abs().max_element() + radius, f32::INFINITY)
             }
         };
-        Interaction { p, ng, ns, t: hit.t, magnitude, geom_id: hit.geom_id, prim_id: hit.prim_id }
+        let incoming_side = -ray.dir.dot(ng).signum() * (ray.dir.dot(ng) != 0.0) as u8 as f32;
+        Interaction { p, ng, ns, t: hit.t, magnitude, edge_room, incoming_side, geom_id: hit.geom_id, prim_id: hit.prim_id }
     }
 }
 
@@ -117,10 +136,15 @@ fn away_from_edges(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32, magnitude: f32, tw
 
 impl Interaction {
     /// A ray leaving the surface along `wi`, its origin stepped off the
-    /// surface to the side `wi` goes (see `offset_ray_origin`).
+    /// surface to the side `wi` goes (see `spawn_origin`): on the ray's own
+    /// line where it leaves to the side it came from, along the normal where
+    /// it is transmitted (there the exact line would put exits near the
+    /// critical angle on its wrong side as often as not: a lossless sphere at
+    /// 8192 lost paths to total internal reflection).
     pub fn spawn_ray(&self, wi: Vec3) -> Ray {
         let n = if wi.dot(self.ng) >= 0.0 { self.ng } else { -self.ng };
-        Ray::new(offset_ray_origin(self.p, n, self.magnitude), wi)
+        let reflected = self.incoming_side != 0.0 && wi.dot(self.ng) * self.incoming_side > 0.0;
+        Ray::new(spawn_origin(self.p, n, wi, self.magnitude, if reflected { self.edge_room } else { 0.0 }), wi)
     }
 
     /// A segment from the surface to `target` (already stepped off its own
@@ -132,7 +156,7 @@ impl Interaction {
     /// between native and Embree). pbrt-v4 ends shadow rays the same way.
     pub fn spawn_ray_to(&self, target: Vec3) -> Ray {
         let n = if (target - self.p).dot(self.ng) >= 0.0 { self.ng } else { -self.ng };
-        let o = offset_ray_origin(self.p, n, self.magnitude);
+        let o = spawn_origin(self.p, n, target - self.p, self.magnitude, self.edge_room);
         Ray::with_range(o, target - o, 0.0, 1.0 - SHADOW_EPSILON)
     }
 }

@@ -89,7 +89,7 @@ impl Vertex {
     /// A vertex that is not a surface: the lens point `p`, or a light's
     /// point `p` with emitting normal `n` (zero for a point light).
     pub fn at_point(kind: Kind, p: Vec3, n: Vec3, magnitude: f32, geom_id: u32, prim_id: u32, beta: Vec3, pdf_fwd: f32) -> Vertex {
-        let it = Interaction { p, ng: n, ns: n, t: 0.0, magnitude, geom_id, prim_id };
+        let it = Interaction { p, ng: n, ns: n, t: 0.0, magnitude, edge_room: 0.0, incoming_side: 0.0, geom_id, prim_id };
         let frame = Frame::new(if n == Vec3::ZERO { Vec3::Z } else { n });
         Vertex { kind, it, frame, wo: Vec3::ZERO, bsdf: None, beta, pdf_fwd, pdf_rev: 0.0, delta: false }
     }
@@ -112,7 +112,7 @@ impl Vertex {
     /// The vertex of light `k` at infinity in direction `to_light` (unit);
     /// `p`: where its ray left the `World` disk, when it started one.
     pub fn distant(k: usize, p: Vec3, to_light: Vec3, beta: Vec3, pdf_fwd: f32) -> Vertex {
-        let it = Interaction { p, ng: Vec3::ZERO, ns: to_light, t: 0.0, magnitude: p.abs().max_element(), geom_id: u32::MAX, prim_id: 0 };
+        let it = Interaction { p, ng: Vec3::ZERO, ns: to_light, t: 0.0, magnitude: p.abs().max_element(), edge_room: 0.0, incoming_side: 0.0, geom_id: u32::MAX, prim_id: 0 };
         Vertex { kind: Kind::Distant(k), it, frame: Frame::new(to_light), wo: Vec3::ZERO, bsdf: None, beta, pdf_fwd, pdf_rev: 0.0, delta: false }
     }
 
