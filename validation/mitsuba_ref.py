@@ -21,9 +21,9 @@ focal plane). The environment map = `envmap` after two exact fixes: Mitsuba's la
 other handedness (the map is flipped left-right and turned 90 degrees about +y) and puts rows
 at v = j/(H-1) (the map is resampled to 2H+1 rows that reproduce our clamped bilinear lookup);
 before rendering, Mitsuba's own lookup is compared with ours in 4096 directions, and a
-mismatch refuses the scene. The hemisphere light (L for y > 0) is the same envmap over texels
-that are L above the horizon and 0 below (`hemisphere_texels`: exact but for a ramp 0.022
-degrees wide across the horizon, symmetric about it).
+mismatch refuses the scene. The hemisphere light (L for y > 0) is an envmap whose rows down to
+the horizon's are L and the rest 0 (`hemisphere_envmap`): exactly L above the horizon, a band
+0.0014 degrees high under it ramping to 0, checked the same way outside that band.
 
 `--integrator ptracer` renders with Mitsuba's particle tracer instead (the same max_depth and
 Russian roulette): the reference for our light tracer (`--integrator light`), which like it
@@ -82,20 +82,49 @@ def mitsuba_envmap(tex, out_path):
     return {"type": "envmap", "filename": out_path, "to_world": m, "scale": 1.0}
 
 
-HEMISPHERE_ROWS = 8192
+# Rows of the hemisphere light's map, odd: Mitsuba's lookup puts row j at theta = pi j/(R - 1),
+# so the middle row lies on the horizon.
+HEMISPHERE_ROWS = 131073
 
 
-def hemisphere_texels(radiance):
-    """Our hemisphere light (radiance L for y > 0, none below) as lat-long texels for
-    `mitsuba_envmap`: HEMISPHERE_ROWS rows (16 columns: it does not vary with phi), L in the
-    upper half, 0 in the lower. Looked up bilinearly, the step at the horizon becomes a ramp
-    one row high (pi/8192, 0.022 degrees) centred on it, symmetric: what it adds below the
-    horizon it takes above, so irradiance differs from the step's only in the second order of
-    the ramp's width (a relative 1e-7 on a surface facing the horizon, below any test's
-    resolution)."""
-    tex = np.zeros((HEMISPHERE_ROWS, 16, 3))
-    tex[: HEMISPHERE_ROWS // 2] = np.array([float(x) for x in radiance])
-    return tex
+def hemisphere_envmap(radiance, out_path):
+    """Our hemisphere light (radiance L for y > 0, none below) as a Mitsuba envmap: rows down
+    to the horizon's own row are L, the rest 0 (16 columns: it does not vary with phi). Looked
+    up bilinearly between rows, every direction above the horizon gets exactly L; below it a
+    band one row high (pi/131072, 0.0014 degrees) ramps from L to 0: a pixel just under a
+    horizon in view reads at most about that band's share of it, light on surfaces a relative
+    1e-5 at most."""
+    import mitsuba as mi
+
+    rows = np.zeros((HEMISPHERE_ROWS, 16, 3), dtype=np.float32)
+    rows[: (HEMISPHERE_ROWS - 1) // 2 + 1] = np.array([float(x) for x in radiance], dtype=np.float32)
+    mi.Bitmap(rows).write(out_path)
+    # As `mitsuba_envmap`: local y is our y, so the rows run from +y to -y.
+    m = mi.ScalarTransform4f([[0, 0, 1, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, 0, 0, 1]])
+    return {"type": "envmap", "filename": out_path, "to_world": m, "scale": 1.0}
+
+
+def check_hemisphere(scene, radiance):
+    """Mitsuba's lookup of the hemisphere map against ours (L above the horizon, 0 below) in
+    4096 directions outside the band under the horizon; a mismatch refuses the scene."""
+    import mitsuba as mi
+
+    env = scene.environment()
+    band = np.sin(np.pi / (HEMISPHERE_ROWS - 1))
+    rng = np.random.default_rng(6)
+    d = rng.normal(size=(4096, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[0] = [0.6, 1e-9, 0.8]  # just above the horizon: exactly L
+    L = np.array([float(x) for x in radiance])
+    for k in range(len(d)):
+        if -band <= d[k, 1] <= 0:
+            continue
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(-d[k]))
+        got = np.array(env.eval(si), dtype=np.float64)[:3]
+        want = L if d[k, 1] > 0 else 0 * L
+        if np.abs(got - want).max() > 1e-5 * max(L.max(), 1e-30):
+            refuse(f"Mitsuba's hemisphere map gives {got.tolist()} in direction {d[k].tolist()}, ours {want.tolist()}")
 
 
 def check_envmap(scene, tex):
@@ -190,15 +219,14 @@ def scene_dict(spec, folder, max_depth, integrator="path"):
         elif t == "hemisphere":
             if [float(x) for x in l["up"]] != [0.0, 1.0, 0.0]:
                 refuse("hemisphere light around an axis other than +y")
-            if "_env_texels" in d:
+            if "_env_texels" in d or "_hemisphere" in d:
                 refuse("a hemisphere light and an environment map together (Mitsuba takes one environment)")
-            tex = hemisphere_texels(l["radiance"])
-            d[f"light{i}"] = mitsuba_envmap(tex, os.path.join(folder, "hemisphere_mitsuba.exr"))
-            d["_env_texels"] = tex
+            d[f"light{i}"] = hemisphere_envmap(l["radiance"], os.path.join(folder, "hemisphere_mitsuba.exr"))
+            d["_hemisphere"] = l["radiance"]
         elif t == "rect":
             refuse("rectangle light that rays cannot hit: every Mitsuba emitter shape also occludes")
         elif t == "environment":
-            if "_env_texels" in d:
+            if "_env_texels" in d or "_hemisphere" in d:
                 refuse("a hemisphere light and an environment map together (Mitsuba takes one environment)")
             tex = np.array(mi.Bitmap(os.path.join(folder, l["file"])), dtype=np.float64)[..., :3]
             d[f"light{i}"] = mitsuba_envmap(tex, os.path.join(folder, "environment_mitsuba.exr"))
@@ -228,9 +256,12 @@ def main():
         spec = json.load(f)
     sd = scene_dict(spec, args.scene, args.max_depth, args.integrator)
     tex = sd.pop("_env_texels", None)
+    hemisphere = sd.pop("_hemisphere", None)
     scene = mi.load_dict(sd)
     if tex is not None:
         check_envmap(scene, tex)
+    if hemisphere is not None:
+        check_hemisphere(scene, hemisphere)
     # The first render of a loaded scene pays one-time costs (thread pool, caches): an
     # untimed 1-spp render first, so neither the renders nor the ladder carry them.
     mi.render(scene, spp=1, seed=0)
