@@ -36,6 +36,9 @@ import sys
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from mesh_io import read_obj  # noqa: E402
+
 
 def refuse(msg):
     print(f"mitsuba_ref: cannot represent exactly: {msg}", file=sys.stderr)
@@ -200,7 +203,13 @@ def scene_dict(spec, folder, max_depth, integrator="path"):
             refuse(f"shape {s['id']}: only one-sided emission is modelled")
         bsdf = bsdf_of(s)
         if s["type"] == "mesh":
-            shape = {"type": "obj", "filename": os.path.join(folder, s["file"]), "face_normals": False, "bsdf": bsdf}
+            path = os.path.join(folder, s["file"])
+            _, normals, _ = read_obj(path)
+            zero = sum(1 for n in normals if not (n[0] * n[0] + n[1] * n[1] + n[2] * n[2] > 0.25))
+            if zero:
+                refuse(f"shape {s['id']}: {zero} vertex normals of zero length (vertices of degenerate triangles only, "
+                       "where ours interpolates the others): Mitsuba's OBJ loader rejects the mesh")
+            shape = {"type": "obj", "filename": path, "face_normals": False, "bsdf": bsdf}
         elif s["type"] == "sphere":
             shape = {"type": "sphere", "center": s["center"], "radius": s["radius"], "bsdf": bsdf}
         else:
