@@ -141,16 +141,17 @@ const ALONG_STEPS: f32 = 2.0;
 /// does not leave to `n`'s side, and a `room` of 0.
 pub fn spawn_origin(p: Vec3, n: Vec3, d: Vec3, magnitude: f32, room: f32) -> Vec3 {
     let step = OFFSET_ULPS * ulp(magnitude.max(p.abs().max_element()));
+    let normal_step = p + n * step;
     let d = d.normalize_or_zero();
     let c = n.dot(d);
     if !(c > 0.0) {
-        return p + n * step;
+        return normal_step;
     }
     let along = (step / c).min(ALONG_STEPS * step);
     // How far the move along the ray goes within the surface's plane.
     let sideways = along * (1.0 - c * c).max(0.0).sqrt();
     if !(sideways + step <= room) {
-        return p + n * step;
+        return normal_step;
     }
     // What the ray's own climb leaves to the normal: 0 from 30° off the
     // surface (rounding aside).

@@ -90,7 +90,8 @@ impl Interaction {
                 (*center + n * *radius, n, n, center.abs().max_element() + radius, f32::INFINITY)
             }
         };
-        let incoming_side = -ray.dir.dot(ng).signum() * (ray.dir.dot(ng) != 0.0) as u8 as f32;
+        let towards = ray.dir.dot(ng);
+        let incoming_side = if towards < 0.0 { 1.0 } else if towards > 0.0 { -1.0 } else { 0.0 };
         Interaction { p, ng, ns, t: hit.t, magnitude, edge_room, incoming_side, geom_id: hit.geom_id, prim_id: hit.prim_id }
     }
 }

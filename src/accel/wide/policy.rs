@@ -101,6 +101,17 @@ pub(super) struct Policy {
 const PACKET_PREFETCH_BYTES: usize = 16 << 20;
 
 impl Policy {
+    /// What a tree holds while its policy is being chosen: the scalar
+    /// traversals only, which is all `choose` runs.
+    pub(super) const PROVISIONAL: Policy = Policy {
+        boxes: BoxIsa::Sse2,
+        packets: PacketIsa::Avx2,
+        closest: ClosestBatches::Single,
+        shadows: ShadowBatches::Packets,
+        prefetch: PacketPrefetch::Off,
+        any_order: ChildOrder::FarthestFirst,
+    };
+
     /// The policy for a freshly built `tree` (whose own policy is not read)
     /// under `options` on this CPU.
     pub(super) fn choose<const W: usize>(tree: &WideBvh<W>, options: &NativeOptions) -> Policy {
@@ -108,7 +119,8 @@ impl Policy {
         let boxes = if avx { BoxIsa::Avx2 } else { BoxIsa::Sse2 };
         let packets = if W == 8 && avx512_available(options.isa) { PacketIsa::Avx512 } else { PacketIsa::Avx2 };
         let interleave = avx && tree.interleave_pays();
-        let streams = avx && W == 8;
+        // `avx` implies `W` = 8, which streams need.
+        let streams = avx;
         let otherwise = if interleave { Otherwise::Interleaved } else { Otherwise::Single };
         let closest = match options.batch {
             BatchWay::Auto if streams => ClosestBatches::StreamsWhereCoherent { otherwise },
@@ -149,11 +161,7 @@ impl Policy {
     /// The policy's words for a tree's summary line: "AVX2, shadow packets,
     /// any hit farthest first".
     pub(super) fn describe(&self) -> String {
-        let isa = match (self.boxes, self.avx512()) {
-            (_, true) => "AVX2, AVX-512 packets",
-            (BoxIsa::Avx2, false) => "AVX2",
-            (BoxIsa::Sse2, false) => "SSE2",
-        };
+        let isa = isa_words(self.avx(), self.avx512());
         let shadows = match self.shadows {
             ShadowBatches::Packets => "shadow packets",
             ShadowBatches::Streams => "shadow streams",
@@ -169,12 +177,15 @@ impl Policy {
 /// The SIMD level native traversal runs at on this CPU with `isa`: "AVX2",
 /// "AVX2, AVX-512 packets" or "SSE2".
 pub fn simd_level(isa: NativeIsa) -> &'static str {
-    if avx512_available(isa) {
-        "AVX2, AVX-512 packets"
-    } else if avx_available_for(isa) {
-        "AVX2"
-    } else {
-        "SSE2"
+    isa_words(avx_available_for(isa), avx512_available(isa))
+}
+
+/// The words for the kernels in use, as `simd_level` and the summary line say them.
+fn isa_words(avx: bool, avx512: bool) -> &'static str {
+    match (avx, avx512) {
+        (_, true) => "AVX2, AVX-512 packets",
+        (true, false) => "AVX2",
+        (false, false) => "SSE2",
     }
 }
 
@@ -213,17 +224,4 @@ fn avx512_available(isa: NativeIsa) -> bool {
     {
         false
     }
-}
-
-impl Policy {
-    /// What a tree holds while its policy is being chosen: the scalar
-    /// traversals only, which is all `choose` runs.
-    pub(super) const PROVISIONAL: Policy = Policy {
-        boxes: BoxIsa::Sse2,
-        packets: PacketIsa::Avx2,
-        closest: ClosestBatches::Single,
-        shadows: ShadowBatches::Packets,
-        prefetch: PacketPrefetch::Off,
-        any_order: ChildOrder::FarthestFirst,
-    };
 }
