@@ -501,6 +501,13 @@ class Harness:
         return folder
 
 
+def selected_cases(tier, only):
+    """The tier's cases whose scene name with its tag contains one of `only`'s comma-separated
+    strings (all of them when `only` is empty)."""
+    wanted = only.split(",") if only else []
+    return [c for c in tier["cases"] if not wanted or any(o in c["scene"] + c.get("tag", "") for o in wanted)]
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("tier", choices=sorted(TIERS))
@@ -522,10 +529,7 @@ def main():
         tier["cases"] = own_scene_cases(args.scene, args.max_depth, refs, args.scene_flags.split())
     hz = Harness(args, tier)
     results = []
-    for case in tier["cases"]:
-        name = case["scene"] + case.get("tag", "")
-        if args.only and not any(o in name for o in args.only.split(",")):
-            continue
+    for case in selected_cases(tier, args.only):
         {"radiance": hz.run_radiance, "geometry": hz.run_geometry, "adaptive": hz.run_adaptive}[case["kind"]](case, results)
     import mitsuba
 

@@ -15,7 +15,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from cases import TIERS  # noqa: E402
-from run_cases import ROOT, Harness  # noqa: E402
+from run_cases import ROOT, Harness, selected_cases  # noqa: E402
 
 
 def main():
@@ -29,10 +29,8 @@ def main():
     tier = dict(TIERS[args.tier])
     hz = Harness(args, tier)
     t_all = time.time()
-    for case in tier["cases"]:
+    for case in selected_cases(tier, args.only):
         name = case["scene"] + case.get("tag", "")
-        if args.only and not any(o in name for o in args.only.split(",")):
-            continue
         t0 = time.time()
         folder = hz.fresh("warm_cache")
         _, key, ref_dir = hz.export(case, folder)
