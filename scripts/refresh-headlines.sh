@@ -5,24 +5,32 @@
 #      nothing timed, and nothing to do where an earlier run left them);
 #   1. speed of traversal: `pathtracer bench` with the peers (scripts/bench-readme.sh) into
 #      docs/benchmarks/bench.md and .csv, and the README's bench table;
-#   2. error at equal time: the harness's full tier twice with the native backend (the README's
-#      error table is native's; the Embree backends render the same images, and the bench times
-#      their traversal), then validation/speed_vs_error.py over both runs into
-#      docs/validation/speed-vs-error.{md,csv} and the README's table;
+#   2. error at equal time: the harness's full tier with the native backend (the README's error
+#      table is native's; the Embree backends render the same images, and the bench times their
+#      traversal), then validation/speed_vs_error.py into docs/validation/speed-vs-error.{md,csv}
+#      and the README's table (`--full-runs 2` runs it twice and tables the worse ratio);
 #   3. correctness: the harness's quick tier with every backend, its verdicts into the README and
 #      docs/validation/README.md (validation/verdict_summary.py).
 # Refuses a tree with uncommitted changes (the tables must name a commit that reproduces them)
-# and checks at the end that the commit did not change under it. On 2 cores: about 50 minutes
+# and checks at the end that the commit did not change under it. On 2 cores: about 95 minutes
 # of bench, 40 of each full-tier run and 10 of quick tier once the references are cached (about
 # an hour more to render them after the exporters change: step 0, which may run earlier, on
 # its own). Run it on a quiet machine. Commit the changed files afterwards.
 #
-#   scripts/refresh-headlines.sh [--skip-bench] [--skip-error] [--skip-verdicts]
+#   scripts/refresh-headlines.sh [--skip-bench] [--skip-error] [--skip-verdicts] [--full-runs N]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 python3 validation/provenance.py --clean >/dev/null
 commit="$(git rev-parse HEAD)"
 skip=" $* "
+full_runs=1
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --full-runs) full_runs="$2"; shift 2 ;;
+        --skip-bench|--skip-error|--skip-verdicts) shift ;;
+        *) echo "refresh-headlines: unknown argument $1" >&2; exit 2 ;;
+    esac
+done
 runs="$(mktemp -d)"
 trap 'rm -rf "$runs"' EXIT
 
@@ -36,12 +44,12 @@ if [[ "$skip" != *" --skip-bench "* ]]; then
     bash scripts/bench-readme.sh
 fi
 if [[ "$skip" != *" --skip-error "* ]]; then
-    for i in 1 2; do
-        echo "== 2/3 full tier, run $i of 2 =="
+    for i in $(seq "$full_runs"); do
+        echo "== 2/3 full tier, run $i of $full_runs =="
         bash validation/run full --backends native || true   # the verdicts are read from summary.json below
         cp validation/out/summary.json "$runs/full-$i.json"
     done
-    validation/.venv/bin/python validation/speed_vs_error.py "$runs/full-1.json" "$runs/full-2.json" \
+    validation/.venv/bin/python validation/speed_vs_error.py "$runs"/full-*.json \
         --csv docs/validation/speed-vs-error.csv --svg docs/validation/speed-vs-error.svg \
         --cases CBspheres_lambertian_m5,CBgems_m5,bunny_unlit_m3_env_studio --paste
 fi

@@ -32,7 +32,7 @@ fn no_arguments_renders_the_builtin_scene_into_the_current_directory() {
     let png = d.join("CBspheres_lambertian.png");
     assert!(png.exists(), "no image written; stdout: {stdout}");
     assert!(stdout.contains("wrote CBspheres_lambertian.png"), "{stdout}");
-    for field in ["primitives", "backend native", "BVH build", "render", "rays", "Mrays/s"] {
+    for field in ["primitives", "backend native", "spatial splits", "BVH build", "render", "rays", "Mrays/s"] {
         assert!(stdout.contains(field), "summary lacks '{field}': {stdout}");
     }
     let img = image::open(&png).unwrap().to_rgba8();

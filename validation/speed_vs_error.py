@@ -101,13 +101,23 @@ def headline_table(rows, meta, goal=0.5):
     cases = list(dict.fromkeys(r["case"] for r in rows if not r["hemisphere"]))
     worst = lambda r: max(x for x in r["ratios"] if x is not None) if any(x is not None for x in r["ratios"]) else None
     cell = lambda case, ref: next((f"{worst(r):.2f}" for r in rows if r["case"] == case and r["backend"] == "native" and r["reference"] == ref and worst(r) is not None), "–")
-    out = [f"Equal-time relMSE, ours (native backend) ÷ reference, below 1 is better; the worse of {meta['runs']} {meta['tier']}-tier runs "
+    out = [f"Equal-time relMSE, ours (native backend) ÷ reference, below 1 is better; {runs_words(meta)} "
            f"(`validation/speed_vs_error.py`). {provenance_line(meta)}", "",
            "| case | integrator | ÷ Cycles 3.4 | ÷ Mitsuba 3 |", "|---|---|---:|---:|"]
     out += [f"| {case_name(c)} | {integrator(c)} | {cell(c, 'cycles')} | {cell(c, 'mitsuba')} |" for c in cases]
     rated = [r for r in rows if not r["hemisphere"] and worst(r) is not None]
-    out += ["", f"{sum(1 for r in rated if worst(r) <= goal)} of {len(rated)} rows (both backends) at or below {goal} in every run."]
+    every = " in every run" if int(meta["runs"]) > 1 else ""
+    out += ["", f"{sum(1 for r in rated if worst(r) <= goal)} of {len(rated)} rows at or below {goal}{every}."]
     return "\n".join(out)
+
+
+def runs_words(meta, worse=True):
+    """"one full-tier run", or "the worse of 2 full-tier runs" ("2 full-tier runs" with
+    `worse` false)."""
+    n = int(meta["runs"])
+    if n == 1:
+        return f"one {meta['tier']}-tier run"
+    return f"{'the worse of ' if worse else ''}{n} {meta['tier']}-tier runs"
 
 
 def provenance_line(meta):
@@ -239,7 +249,7 @@ def main():
     if args.csv:
         write_csv(args.csv, rows, meta)
     if args.paste:
-        intro = (f"{meta['runs']} {meta['tier']}-tier runs. {provenance_line(meta)} "
+        intro = (f"{runs_words(meta, worse=False).capitalize()}. {provenance_line(meta)} "
                  "Equal-time relMSE ratio ours ÷ reference (below 0.5 is the goal; `-H` rows are the naive estimator on purpose), "
                  "with the fixed and per-spp costs of the last run (`validation/speed_vs_error.py`):")
         paste(os.path.join(ROOT, "docs", "validation", "speed-vs-error.md"), "speed-vs-error", intro + "\n\n" + table)

@@ -18,7 +18,7 @@ pub mod options;
 pub mod prims;
 pub mod workloads;
 
-pub use options::{BatchWay, BuildOptions, NativeIsa, NativeOptions, ShadowWay};
+pub use options::{BatchWay, BuildOptions, NativeIsa, NativeOptions, ShadowWay, Splits};
 
 use crate::error::Result;
 pub use crate::ray::Hit;

@@ -50,20 +50,35 @@ pub enum BatchWay {
     Streams,
 }
 
+/// Whether the native build uses spatial splits (`bvh::spatial`).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum Splits {
+    /// Decided per scene (the default): tried only where the rays the
+    /// caller expects to trace (`NativeOptions::expected_rays`) could repay
+    /// the second build, kept only where they cut the tree's counted work
+    /// on its own sample of rays (see `wide::split_choice`).
+    #[default]
+    Auto,
+    /// Spatial splits may add this many references per primitive (0: none;
+    /// at most 4), whatever they gain.
+    Budget(f64),
+}
+
 /// The native backend's build choices.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NativeOptions {
     pub isa: NativeIsa,
-    /// Spatial splits may add this many references per primitive (0: none,
-    /// the default by measurement; at most 4).
-    pub split_budget: f64,
+    pub splits: Splits,
+    /// Rays the caller expects to trace through the tree (0: unknown), from
+    /// which `Splits::Auto` judges whether a second build could pay.
+    pub expected_rays: u64,
     pub shadow: ShadowWay,
     pub batch: BatchWay,
 }
 
 impl Default for NativeOptions {
     fn default() -> Self {
-        NativeOptions { isa: NativeIsa::Auto, split_budget: 0.0, shadow: ShadowWay::Auto, batch: BatchWay::Auto }
+        NativeOptions { isa: NativeIsa::Auto, splits: Splits::Auto, expected_rays: 0, shadow: ShadowWay::Auto, batch: BatchWay::Auto }
     }
 }
 
@@ -86,9 +101,10 @@ impl NativeOptions {
             };
         }
         if let Some(v) = var("PATHTRACER_NATIVE_SPLITS") {
-            o.split_budget = match v.parse::<f64>() {
-                Ok(b) if (0.0..=4.0).contains(&b) => b,
-                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_SPLITS={v}: expected a number from 0 to 4"))),
+            o.splits = match v.parse::<f64>() {
+                _ if v == "auto" => Splits::Auto,
+                Ok(b) if (0.0..=4.0).contains(&b) => Splits::Budget(b),
+                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_SPLITS={v}: expected auto or a number from 0 to 4"))),
             };
         }
         if let Some(v) = var("PATHTRACER_NATIVE_SHADOW") {
@@ -145,7 +161,8 @@ mod tests {
     fn switches_parse_and_bad_values_are_refused_by_name() {
         assert_eq!(parse(&[]).unwrap(), NativeOptions::default());
         let o = parse(&[("PATHTRACER_NATIVE_ISA", "sse"), ("PATHTRACER_NATIVE_SPLITS", "0.3"), ("PATHTRACER_NATIVE_SHADOW", "streams")]).unwrap();
-        assert_eq!((o.isa, o.split_budget, o.shadow), (NativeIsa::Sse2, 0.3, ShadowWay::Streams));
+        assert_eq!((o.isa, o.splits, o.shadow), (NativeIsa::Sse2, Splits::Budget(0.3), ShadowWay::Streams));
+        assert_eq!(parse(&[("PATHTRACER_NATIVE_SPLITS", "auto")]).unwrap().splits, Splits::Auto);
         assert_eq!(parse(&[("PATHTRACER_NATIVE_ISA", "avx512")]).unwrap().isa, NativeIsa::Avx512Packets);
         assert_eq!(parse(&[("PATHTRACER_NATIVE_BATCH", "streams")]).unwrap().batch, BatchWay::Streams);
         for (k, v) in [("PATHTRACER_NATIVE_BATCH", "sorted"), ("PATHTRACER_NATIVE_ISA", "neon"), ("PATHTRACER_NATIVE_SPLITS", "5"), ("PATHTRACER_NATIVE_SPLITS", "nan"), ("PATHTRACER_NATIVE_SHADOW", "both")] {

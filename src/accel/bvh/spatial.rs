@@ -14,9 +14,9 @@
 //! than `ALPHA` of the root's area are searched (the paper's criterion), and
 //! only while the build's reference budget lasts (`BuildSet`'s spare room).
 //!
-//! **Off by default** (`PATHTRACER_NATIVE_SPLITS=B` allows B extra
-//! references per primitive), because it did not pay on the bench's rays.
-//! Measured (2-vCPU AMD EPYC, 1 thread, best of 5 passes, two alternating
+//! **Decided per scene** (`wide::split_choice`; `PATHTRACER_NATIVE_SPLITS=B`
+//! fixes B extra references per primitive), because on most scenes it did
+//! not pay. Measured (2-vCPU AMD EPYC, 1 thread, best of 5 passes, two alternating
 //! runs, budget 0.3, Mrays/s without -> with): random rays on beetle
 //! 11.6-11.8 -> 12.1-12.2 and the subdivided bunny 7.5-7.6 -> 7.9-8.2, but
 //! stadium:500k 10.5 -> 9.7 (its SAH cost rose, 8.97 -> 9.61: the greedy

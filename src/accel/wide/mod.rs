@@ -46,7 +46,9 @@ mod occluders;
 mod sweep;
 mod packet;
 mod policy;
+mod sample;
 mod single;
+mod split_choice;
 mod stack;
 mod stream;
 mod triangle;
@@ -56,6 +58,7 @@ use policy::avx_available;
 use policy::{ClosestBatches, Otherwise, PacketPrefetch, Policy};
 pub use policy::simd_level;
 use stack::ChildOrder;
+pub use split_choice::SplitOutcome;
 
 use kernels::Slab;
 use triangle::{intersect_group, LaneHit, Shear};
@@ -71,6 +74,10 @@ use crate::scene::Shape;
 
 /// Triangles per group: one SSE register.
 const LANES: usize = 4;
+/// The spatial-split budget `Splits::Auto` tries (extra references per
+/// primitive): the one the measurements in `bvh::spatial` and
+/// `split_choice` were made with.
+const AUTO_SPLIT_BUDGET: f64 = 0.3;
 /// The width the native backend uses. Measured with `pathtracer bench` (1
 /// thread, Mrays/s, camera/shadow/random): cow 4-wide 31.4/9.2/8.6, 8-wide
 /// 43.1/12.4/9.7; CBbunny 28.3/14.3/9.9 against 38.5/15.7/11.7; 1M-triangle
@@ -147,6 +154,8 @@ pub(super) struct Tree<const W: usize> {
 pub struct WideBvh<const W: usize> {
     tree: Tree<W>,
     policy: Policy,
+    /// What the build did about spatial splits, and why.
+    splits: SplitOutcome,
 }
 
 impl<const W: usize> WideBvh<W> {
@@ -158,30 +167,63 @@ impl<const W: usize> WideBvh<W> {
     /// The tree over `shapes` with spatial splits allowed to add up to
     /// `budget` references per primitive (0: object splits only).
     pub fn build_with_splits(shapes: &[Shape], budget: f64) -> Self {
-        Self::build_with(shapes, &super::NativeOptions { split_budget: budget, ..Default::default() })
+        Self::build_with(shapes, &super::NativeOptions { splits: super::Splits::Budget(budget), ..Default::default() })
     }
 
     /// The tree over `shapes` with `options`' choices (instruction set,
-    /// spatial-split budget, shadow-batch way), fixed for its lifetime.
+    /// spatial splits, batch ways), fixed for its lifetime. With
+    /// `Splits::Auto` the tree without spatial splits is built first and
+    /// the one with them only where they could pay (`split_choice`).
     pub fn build_with(shapes: &[Shape], options: &super::NativeOptions) -> Self {
-        let budget = options.split_budget.clamp(0.0, 4.0);
         assert!(W == 4 || W == 8, "WideBvh supports widths 4 and 8");
         let prims = prims::PrimTable::new(shapes);
+        let budget = match options.splits {
+            super::Splits::Budget(b) => {
+                let b = b.clamp(0.0, 4.0);
+                return Self::with_policy(Self::tree(&prims, b), options, SplitOutcome::Asked { budget: b });
+            }
+            super::Splits::Auto => AUTO_SPLIT_BUDGET,
+        };
+        let plain = Self::with_policy(Self::tree(&prims, 0.0), options, SplitOutcome::NotTried { expected_rays: 0, needed_rays: 0 });
+        if options.expected_rays == 0 {
+            return plain;
+        }
+        let sample = plain.sample(sample::SAMPLE_RAYS);
+        let plain_work = plain.work(&sample);
+        let needed_rays = split_choice::rays_to_repay(&plain_work, prims.len());
+        if options.expected_rays < needed_rays {
+            return WideBvh { splits: SplitOutcome::NotTried { expected_rays: options.expected_rays, needed_rays }, ..plain };
+        }
+        let split = Self::with_policy(Self::tree(&prims, budget), options, SplitOutcome::Asked { budget });
+        let outcome = split_choice::judge(&plain_work, &split.work(&sample));
+        if outcome.split() {
+            WideBvh { splits: outcome, ..split }
+        } else {
+            WideBvh { splits: outcome, ..plain }
+        }
+    }
+
+    /// The tree's data over `prims`, spatial splits adding up to `budget`
+    /// references per primitive.
+    fn tree(prims: &prims::PrimTable, budget: f64) -> Tree<W> {
         let spare = (prims.len() as f64 * budget) as usize;
-        let mut refs = prim_refs(&prims, spare);
+        let mut refs = prim_refs(prims, spare);
         let mut out = Arrays::<W>::default();
         let (mut root, mut bounds) = (EMPTY, crate::geometry::Aabb::EMPTY);
         if let Some(set) = BuildSet::root(&mut refs, prims.len()) {
             bounds = set.bounds();
             let mut part = layout::Part::with_room_for(prims.len());
-            let code = part.build(set, &prims);
-            (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, &prims);
+            let code = part.build(set, prims);
+            (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, prims);
         }
         let root_area = if root == EMPTY { 0.0 } else { bounds.half_area() as f64 };
-        let tree = Tree { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, bounds, root_area, root_diagonal: bounds.extent().length() };
-        // The policy is chosen from the tree, through the traversals that
-        // need no policy of their own (scalar box tests).
-        let mut b = WideBvh { tree, policy: Policy::PROVISIONAL };
+        Tree { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, bounds, root_area, root_diagonal: bounds.extent().length() }
+    }
+
+    /// `tree` with its policy under `options`, chosen from the tree through
+    /// the traversals that need no policy of their own (scalar box tests).
+    fn with_policy(tree: Tree<W>, options: &super::NativeOptions, splits: SplitOutcome) -> Self {
+        let mut b = WideBvh { tree, policy: Policy::PROVISIONAL, splits };
         b.policy = Policy::choose(&b, options);
         b
     }
@@ -282,14 +324,15 @@ impl<const W: usize> Traversal for WideBvh<W> {
     }
 
     fn choices(&self) -> Option<String> {
-        Some(self.policy.describe())
+        Some(format!("{}, {}", self.policy.describe(), self.splits.describe()))
     }
 
     fn describe(&self) -> String {
         let sah = self.sah();
         format!(
-            "native ({W}-wide BVH, binned SAH, {}, {} nodes, {} triangle groups of 4, {} leaf records, SAH cost {:.2} = nodes {:.2} + leaves {:.2})",
+            "native ({W}-wide BVH, binned SAH, {}, {}, {} nodes, {} triangle groups of 4, {} leaf records, SAH cost {:.2} = nodes {:.2} + leaves {:.2})",
             self.policy.describe(),
+            self.splits.describe(),
             self.tree.nodes.len(),
             self.tree.groups.len(),
             self.tree.leaves.len(),

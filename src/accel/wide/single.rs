@@ -81,8 +81,14 @@ impl<const W: usize> WideBvh<W> {
 
     #[inline(always)]
     pub(super) fn closest<const AVX: bool>(&self, ray: &Ray) -> Option<Hit> {
+        self.closest_counted::<AVX>(ray, &mut 0)
+    }
+
+    /// `closest`, adding the nodes and leaf groups it visits to `work`.
+    #[inline(always)]
+    pub(super) fn closest_counted<const AVX: bool>(&self, ray: &Ray, work: &mut u32) -> Option<Hit> {
         let mut best: Option<Hit> = None;
-        self.walk::<AVX, false, _>(ray, ChildOrder::NearestFirst, &mut 0, |h, tmax| {
+        self.walk::<AVX, false, _>(ray, ChildOrder::NearestFirst, work, |h, tmax| {
             if closer(h, &best) {
                 *tmax = h.t;
                 best = Some(h);

@@ -198,9 +198,13 @@ impl std::fmt::Display for Contender {
 }
 
 impl Contender {
-    fn build(self, scene: &Scene, threads: usize) -> Result<accel::Built> {
+    fn build(self, scene: &Scene, threads: usize, expected_rays: u64) -> Result<accel::Built> {
         match self {
-            Contender::Backend(k) => accel::build_with(k, &scene.shapes, &crate::app::build_options(threads)?),
+            Contender::Backend(k) => {
+                let mut options = crate::app::build_options(threads)?;
+                options.native.expected_rays = expected_rays;
+                accel::build_with(k, &scene.shapes, &options)
+            }
             #[cfg(feature = "peers")]
             Contender::Obvhs => {
                 // obvhs builds on rayon's global pool (all threads).
@@ -288,7 +292,10 @@ fn path_render_rows(name: &str, backends: &[BackendKind], threads: usize) -> Res
     let mut rows = String::new();
     let mut first: Option<Vec<Vec3>> = None;
     for &kind in backends {
-        let built = accel::build_with(kind, &scene.shapes, &crate::app::build_options(threads)?)?;
+        let mut options = crate::app::build_options(threads)?;
+        // 480x360 pixels, 64 samples, 6 bounces of a closest and a shadow ray.
+        options.native.expected_rays = 480 * 360 * 64 * 6 * 2;
+        let built = accel::build_with(kind, &scene.shapes, &options)?;
         let integ = PathTracer {
             scene: &scene,
             lights: &lights,

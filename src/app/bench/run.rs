@@ -25,6 +25,10 @@ struct Plan {
     thread_counts: Vec<usize>,
     /// The Embree majors timed: their SAH costs and batch calls are tabled.
     majors: Vec<accel::embree::Major>,
+    /// The rays each contender traces on a scene (every kind, pass and
+    /// thread count), which the native build weighs its spatial splits
+    /// against (`NativeOptions::expected_rays`).
+    expected_rays: u64,
 }
 
 const BRUTE: Contender = Contender::Backend(BackendKind::Brute);
@@ -56,7 +60,9 @@ impl Plan {
             .into_iter()
             .filter(|&m| backends.iter().any(|b| b.embree().and_then(|r| r.ok()).is_some_and(|(mm, _)| mm == m)))
             .collect();
-        Ok(Plan { all, thread_counts: thread_counts(&args.threads, all)?, backends, contenders, majors })
+        let thread_counts = thread_counts(&args.threads, all)?;
+        let expected_rays = (args.rays * TIMED.len() * (args.passes + 1) * thread_counts.len()) as u64;
+        Ok(Plan { all, thread_counts, backends, contenders, majors, expected_rays })
     }
 }
 
@@ -156,7 +162,7 @@ fn bench_scene(args: &BenchArgs, plan: &Plan, name: &str, t: &mut Tables) -> Res
         if kind == BRUTE && scene.primitive_count() > BRUTE_LIMIT {
             continue;
         }
-        match kind.build(&scene, plan.all) {
+        match kind.build(&scene, plan.all, plan.expected_rays) {
             Ok(b) => built.push((kind, b)),
             Err(e) => eprintln!("bench: {}: {kind}: {e}", scene.name),
         }
@@ -187,7 +193,7 @@ fn best_builds(plan: &Plan, scene: &Scene) -> HashMap<Contender, f64> {
     let mut build_times: HashMap<Contender, f64> = HashMap::new();
     for _ in 0..BUILD_REPS {
         for &kind in plan.contenders.iter().filter(|&&k| k != BRUTE) {
-            if let Ok(b) = kind.build(scene, plan.all) {
+            if let Ok(b) = kind.build(scene, plan.all, plan.expected_rays) {
                 let t = build_times.entry(kind).or_insert(f64::INFINITY);
                 *t = t.min(b.build_seconds);
             }

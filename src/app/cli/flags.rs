@@ -29,6 +29,23 @@ pub(crate) struct Flags {
     pub sampler: SamplerKind,
 }
 
+impl Flags {
+    /// About how many rays the render traces, for the build's decisions
+    /// (`NativeOptions::expected_rays`): pixels × samples × (one closest
+    /// and one shadow ray per bounce), the bounces capped at 8, past which
+    /// Russian roulette has ended most paths. An upper estimate where
+    /// adaptive sampling stops pixels early. A split render's parts count
+    /// the whole render's rays, so that every part builds the same tree.
+    pub fn expected_rays(&self) -> u64 {
+        let pixels = match self.region {
+            Some(r) => r.w as u64 * r.h as u64,
+            None => self.width as u64 * self.height as u64,
+        };
+        let bounces = self.spec.bounces().map_or(1, |b| b.max_depth.min(8) as u64 + 1);
+        pixels * self.spp as u64 * bounces * 2
+    }
+}
+
 pub(crate) fn check_flags(a: &RenderArgs) -> Result<Flags> {
     let (width, height) = frame_size(a)?;
     let spp = a.spp.unwrap_or(1);

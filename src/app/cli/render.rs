@@ -29,7 +29,9 @@ pub(super) fn run_render(a: &RenderArgs) -> Result<()> {
     for note in job.notes.iter().chain(&f.batch_note) {
         eprintln!("{}: {note}", job.scene.name);
     }
-    let built = accel::build_with(a.backend, &job.scene.shapes, &crate::app::build_options(threads)?)?;
+    let mut options = crate::app::build_options(threads)?;
+    options.native.expected_rays = f.expected_rays();
+    let built = accel::build_with(a.backend, &job.scene.shapes, &options)?;
     let settings = settings(&f, a.seed);
     let start = Instant::now();
     let out = job.render(built.accel.as_ref(), &settings)?;
