@@ -55,7 +55,7 @@ impl<const W: usize> WideBvh<W> {
     /// over the cumulative area, uniform within a triangle; fixed seed),
     /// and the two rays from each. Spread by area rather than weighted by
     /// it: weights as unequal as a Cornell box's two-triangle walls against
-    /// its bunny's 144k triangles left the estimate to a few wall points
+    /// its bunny's 28k triangles left the estimate to a few wall points
     /// (CBbunny's ratio of the two trees' work moved from 1.00 to 0.74
     /// between 512 and 4096 rays). A tree with spatial splits holds some
     /// triangles twice, which raises their share; the split decision
@@ -66,17 +66,14 @@ impl<const W: usize> WideBvh<W> {
         if self.tree.root == EMPTY || groups.is_empty() || n == 0 {
             return s;
         }
-        let corner = |gi: usize, lane: usize, c: usize| {
-            let g = &groups[gi];
-            Vec3::new(g.v[c][0][lane], g.v[c][1][lane], g.v[c][2][lane])
-        };
         // A lane's area: padding and degenerate or non-finite triangles
         // have none.
         let area = |gi: usize, lane: usize| {
             if self.tree.ids[gi * LANES + lane][0] == EMPTY {
                 return 0.0;
             }
-            let a = 0.5 * (corner(gi, lane, 1) - corner(gi, lane, 0)).cross(corner(gi, lane, 2) - corner(gi, lane, 0)).length() as f64;
+            let [a, b, c] = self.corners(gi, lane);
+            let a = 0.5 * (b - a).cross(c - a).length() as f64;
             if a.is_finite() {
                 a
             } else {
@@ -85,8 +82,8 @@ impl<const W: usize> WideBvh<W> {
         };
         // The cumulative area over chunks of groups (summed in parallel,
         // each chunk in order: the same sums at any thread count); a
-        // sample's lane is then found by walking its chunk. A cumulative
-        // array over every lane took 15-30 ms of a 10M-triangle build.
+        // sample's lane is then found by walking its chunk, so a
+        // 10M-triangle scene needs no array of 10M sums.
         let chunk_area: Vec<f64> = (0..groups.len().div_ceil(SAMPLE_CHUNK))
             .into_par_iter()
             .map(|c| (c * SAMPLE_CHUNK..((c + 1) * SAMPLE_CHUNK).min(groups.len())).map(|gi| (0..LANES).map(|lane| area(gi, lane)).sum::<f64>()).sum())
@@ -118,30 +115,40 @@ impl<const W: usize> WideBvh<W> {
             // Rounding left a sliver past the chunk's last triangle.
             last.expect("a chunk with area has a triangle")
         };
-        let b = self.tree.bounds;
-        let light = Vec3::new(b.center().x, b.max.y - 0.02 * b.extent().y, b.center().z);
+        let light = self.sample_light();
         let mut rng = Rng::new(0x5A_4D_91E, 0x7EE);
         for k in 0..n {
             let (gi, lane) = pick(total * (k as f64 + rng.uniform() as f64) / n as f64);
             let (u1, u2) = rng.uniform2();
             let (u3, u4) = rng.uniform2();
-            let [a, b, c] = [0, 1, 2].map(|i| corner(gi, lane, i));
+            let [a, b, c] = self.corners(gi, lane);
             let n = (b - a).cross(c - a).normalize_or_zero();
             let (bu, bv) = crate::sampling::uniform_triangle(u1, u2);
             let p = a + (b - a) * bu + (c - a) * bv;
             if n == Vec3::ZERO || !p.is_finite() {
                 continue;
             }
-            let n = if n.dot(light - p) < 0.0 { -n } else { n };
-            let o = crate::sampling::offset_ray_origin(p, n, crate::sampling::magnitude(&[a, b, c]));
-            let shadow = Ray::with_range(o, light - o, 0.0, 1.0 - 1e-4);
-            let diffuse = Ray::new(o, crate::sampling::Frame::new(n).to_world(crate::sampling::cosine_hemisphere(u3, u4)));
+            let (n, shadow) = shadow_ray(p, n, &[a, b, c], light);
+            let diffuse = Ray::new(shadow.origin, crate::sampling::Frame::new(n).to_world(crate::sampling::cosine_hemisphere(u3, u4)));
             if shadow.is_valid() && diffuse.is_valid() {
                 s.shadow.push(shadow);
                 s.diffuse.push(diffuse);
             }
         }
         s
+    }
+
+    /// The corners of triangle `lane` of group `gi`.
+    pub(super) fn corners(&self, gi: usize, lane: usize) -> [Vec3; 3] {
+        let g = &self.tree.groups[gi];
+        [0, 1, 2].map(|c| Vec3::new(g.v[c][0][lane], g.v[c][1][lane], g.v[c][2][lane]))
+    }
+
+    /// Where the sampled shadow rays go: just under the middle of the top
+    /// of the scene's box, where lights usually are.
+    pub(super) fn sample_light(&self) -> Vec3 {
+        let b = self.tree.bounds;
+        Vec3::new(b.center().x, b.max.y - 0.02 * b.extent().y, b.center().z)
     }
 
     /// Mean work of any-hit rays in `order`.
@@ -166,6 +173,15 @@ impl<const W: usize> WideBvh<W> {
     pub(super) fn work(&self, sample: &Sample) -> Work {
         Work { closest: self.closest_work(&sample.diffuse), any: self.any_work(&sample.shadow, self.policy.any_order) }
     }
+}
+
+/// The shadow-like ray from point `p` of a triangle with `corners` and unit
+/// normal `n` to `light`, leaving the side that faces it, and that side's
+/// normal.
+pub(super) fn shadow_ray(p: Vec3, n: Vec3, corners: &[Vec3; 3], light: Vec3) -> (Vec3, Ray) {
+    let n = if n.dot(light - p) < 0.0 { -n } else { n };
+    let o = crate::sampling::offset_ray_origin(p, n, crate::sampling::magnitude(corners));
+    (n, Ray::with_range(o, light - o, 0.0, 1.0 - 1e-4))
 }
 
 fn mean(rays: &[Ray], work: impl Fn(&Ray) -> u32) -> f64 {

@@ -142,8 +142,7 @@ impl<const W: usize> WideBvh<W> {
         if self.tree.root == EMPTY || groups.is_empty() {
             return ChildOrder::FarthestFirst;
         }
-        let b = self.tree.bounds;
-        let light = glam::Vec3::new(b.center().x, b.max.y - 0.02 * b.extent().y, b.center().z);
+        let light = self.sample_light();
         let (mut far, mut near) = (0.0f64, 0.0f64);
         for k in 0..ORDER_SAMPLE {
             let gi = (k * groups.len() / ORDER_SAMPLE).min(groups.len() - 1);
@@ -151,18 +150,15 @@ impl<const W: usize> WideBvh<W> {
             if self.tree.ids[gi * LANES + lane][0] == EMPTY {
                 continue;
             }
-            let g = &groups[gi];
-            let v = |c: usize| glam::Vec3::new(g.v[c][0][lane], g.v[c][1][lane], g.v[c][2][lane]);
-            let (a, e1, e2) = (v(0), v(1) - v(0), v(2) - v(0));
+            let corners = self.corners(gi, lane);
+            let (a, e1, e2) = (corners[0], corners[1] - corners[0], corners[2] - corners[0]);
             let cross = e1.cross(e2);
             let (n, area) = (cross.normalize_or_zero(), 0.5 * cross.length() as f64);
             let p = a + (e1 + e2) / 3.0;
             if n == glam::Vec3::ZERO || !p.is_finite() || !area.is_finite() {
                 continue;
             }
-            let n = if n.dot(light - p) < 0.0 { -n } else { n };
-            let o = crate::sampling::offset_ray_origin(p, n, crate::sampling::magnitude(&[v(0), v(1), v(2)]));
-            let ray = Ray::with_range(o, light - o, 0.0, 1.0 - 1e-4);
+            let (_, ray) = super::sample::shadow_ray(p, n, &corners, light);
             if ray.is_valid() {
                 let (mut f, mut nf) = (0u32, 0u32);
                 self.any_counted::<false>(&ray, ChildOrder::FarthestFirst, &mut f);
