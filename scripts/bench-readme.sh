@@ -3,9 +3,10 @@
 # docs/benchmarks/bench.csv, with the run's date and commit as the first line, then pastes the
 # headline table (scripts/bench-summary.py) into README.md between the bench markers, so that
 # every performance number in the documentation is the benchmark's output, never typed. Built
-# with the peer BVH libraries (--features peers). Takes about 50 minutes on 2 cores (the
-# 1M-10M-triangle generated scenes). `--paste-only` skips the run and pastes from the existing
-# files; other arguments go to `pathtracer bench`.
+# with the peer BVH libraries (--features peers). Takes about 105-115 minutes on 2 cores (the
+# 1M-10M-triangle generated scenes, and every scene's rays of four kinds one at a time and in
+# batches). `--paste-only` skips the run and pastes from the existing files; other arguments go
+# to `pathtracer bench`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" != "--paste-only" ]; then

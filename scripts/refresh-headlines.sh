@@ -12,8 +12,8 @@
 #   3. correctness: the harness's quick tier with every backend, its verdicts into the README and
 #      docs/validation/README.md (validation/verdict_summary.py).
 # Refuses a tree with uncommitted changes (the tables must name a commit that reproduces them)
-# and checks at the end that the commit did not change under it. On 2 cores: about 95 minutes
-# of bench, 40 of each full-tier run and 10 of quick tier once the references are cached (about
+# and checks at the end that the commit did not change under it. On 2 cores: about 105-115 minutes
+# of bench, 65 of each full-tier run (with its BDPT axis) and 5 of quick tier once the references are cached (about
 # an hour more to render them after the exporters change: step 0, which may run earlier, on
 # its own). Run it on a quiet machine. Commit the changed files afterwards.
 #

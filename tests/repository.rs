@@ -144,3 +144,59 @@ fn the_scenes_are_the_files_their_provenance_page_names() {
     }
 }
 
+
+/// The "Measured DATE at commit X on CPU." sentences of the README's three
+/// generated tables (bench, error at equal time, verdicts), in that order;
+/// `None` for a table missing its markers or its sentence.
+fn headline_provenance(readme: &str) -> Vec<Option<String>> {
+    let sentence = Regex::new(r"Measured \d{4}-\d{2}-\d{2} at commit ([^ ]+) on ([^.\n]+)\.").unwrap();
+    ["bench", "speed-vs-error", "verdicts"]
+        .iter()
+        .map(|name| {
+            let start = readme.find(&format!("<!-- {name}:start"))?;
+            let end = start + readme[start..].find(&format!("<!-- {name}:end -->"))?;
+            let found: Vec<String> = sentence.captures_iter(&readme[start..end]).map(|c| format!("commit {} on {}", &c[1], &c[2])).collect();
+            (found.len() == 1).then(|| found[0].clone())
+        })
+        .collect()
+}
+
+/// Why the headline tables' provenance fails, or `None`: each of the three
+/// names one commit and CPU, the same for all, and a commit that reproduces
+/// them (not "+changes").
+fn headline_problem(readme: &str) -> Option<String> {
+    let p = headline_provenance(readme);
+    if let Some(i) = p.iter().position(|s| s.is_none()) {
+        return Some(format!("the README's {} table has no single \"Measured DATE at commit X on CPU.\" sentence", ["bench", "error", "verdicts"][i]));
+    }
+    let p: Vec<String> = p.into_iter().flatten().collect();
+    if p.iter().any(|s| s.contains("+changes")) {
+        return Some(format!("a headline table was measured on a dirty tree: {p:?}"));
+    }
+    (p.iter().any(|s| *s != p[0])).then(|| format!("the headline tables come from different commits or CPUs: {p:?} (run scripts/refresh-headlines.sh)"))
+}
+
+#[test]
+fn the_headline_check_catches_mixed_provenance() {
+    let table = |name: &str, commit: &str, cpu: &str| format!("<!-- {name}:start -->\nA table. Measured 2026-11-29 at commit {commit} on {cpu}.\n| a |\n<!-- {name}:end -->\n");
+    let good = [table("bench", "e3ea54833f80", "2-vCPU AMD EPYC 9R14"), table("speed-vs-error", "e3ea54833f80", "2-vCPU AMD EPYC 9R14"), table("verdicts", "e3ea54833f80", "2-vCPU AMD EPYC 9R14")].concat();
+    assert_eq!(headline_problem(&good), None);
+    let cpu = [table("bench", "e3ea54833f80", "2-vCPU Intel(R) Xeon(R) Processor"), table("speed-vs-error", "e3ea54833f80", "2-vCPU AMD EPYC 9R14"), table("verdicts", "e3ea54833f80", "2-vCPU AMD EPYC 9R14")].concat();
+    assert!(headline_problem(&cpu).unwrap().contains("different commits or CPUs"));
+    let commit = good.replacen("e3ea54833f80", "948abe6abcde", 1);
+    assert!(headline_problem(&commit).unwrap().contains("different commits or CPUs"));
+    let dirty = good.replace("e3ea54833f80", "e3ea54833f80+changes");
+    assert!(headline_problem(&dirty).unwrap().contains("dirty tree"));
+    let missing = good.replacen("Measured", "Timed", 1);
+    assert!(headline_problem(&missing).unwrap().contains("bench table"));
+}
+
+/// The README's three headline tables were measured together: one commit,
+/// one CPU (`scripts/refresh-headlines.sh` writes them).
+#[test]
+fn the_headline_tables_name_one_commit_and_one_cpu() {
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    if let Some(problem) = headline_problem(&readme) {
+        panic!("README.md: {problem}");
+    }
+}
