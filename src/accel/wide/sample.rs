@@ -122,14 +122,14 @@ impl<const W: usize> WideBvh<W> {
             let (u1, u2) = rng.uniform2();
             let (u3, u4) = rng.uniform2();
             let [a, b, c] = self.corners(gi, lane);
-            let n = (b - a).cross(c - a).normalize_or_zero();
+            let normal = (b - a).cross(c - a).normalize_or_zero();
             let (bu, bv) = crate::sampling::uniform_triangle(u1, u2);
             let p = a + (b - a) * bu + (c - a) * bv;
-            if n == Vec3::ZERO || !p.is_finite() {
+            if normal == Vec3::ZERO || !p.is_finite() {
                 continue;
             }
-            let (n, shadow) = shadow_ray(p, n, &[a, b, c], light);
-            let diffuse = Ray::new(shadow.origin, crate::sampling::Frame::new(n).to_world(crate::sampling::cosine_hemisphere(u3, u4)));
+            let (facing, shadow) = shadow_ray(p, normal, &[a, b, c], light);
+            let diffuse = Ray::new(shadow.origin, crate::sampling::Frame::new(facing).to_world(crate::sampling::cosine_hemisphere(u3, u4)));
             if shadow.is_valid() && diffuse.is_valid() {
                 s.shadow.push(shadow);
                 s.diffuse.push(diffuse);
@@ -184,9 +184,12 @@ pub(super) fn shadow_ray(p: Vec3, n: Vec3, corners: &[Vec3; 3], light: Vec3) -> 
     (n, Ray::with_range(o, light - o, 0.0, 1.0 - 1e-4))
 }
 
-fn mean(rays: &[Ray], work: impl Fn(&Ray) -> u32) -> f64 {
+/// Mean of `work` over `rays`, traced in parallel: the sample runs inside
+/// every default build that is given a ray count. Integer sums, so the
+/// mean is the same at any thread count.
+fn mean(rays: &[Ray], work: impl Fn(&Ray) -> u32 + Sync) -> f64 {
     if rays.is_empty() {
         return 0.0;
     }
-    rays.iter().map(|r| work(r) as f64).sum::<f64>() / rays.len() as f64
+    rays.par_iter().map(|r| work(r) as u64).sum::<u64>() as f64 / rays.len() as f64
 }
