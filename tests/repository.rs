@@ -200,3 +200,66 @@ fn the_headline_tables_name_one_commit_and_one_cpu() {
         panic!("README.md: {problem}");
     }
 }
+
+/// The rows `validation/speed_vs_error.py` makes of `docs/validation/speed-vs-error.csv`
+/// (its `ratio_table`), or why the CSV cannot be read.
+fn error_rows_of_csv(csv: &str) -> Result<Vec<String>, String> {
+    let mut lines = csv.lines().filter(|l| !l.trim().is_empty());
+    lines.next().filter(|l| l.starts_with("# ")).ok_or("no '# date=...' provenance line")?;
+    let head: Vec<&str> = lines.next().ok_or("no header")?.split(',').collect();
+    let runs = head.iter().filter(|h| h.starts_with("run")).count();
+    let number = |s: &str| s.parse::<f64>().map_err(|e| format!("'{s}': {e}"));
+    let mut rows = Vec::new();
+    for line in lines {
+        let c: Vec<&str> = line.split(',').collect();
+        if c.len() != 8 + runs {
+            return Err(format!("{} fields in '{line}', expected {}", c.len(), 8 + runs));
+        }
+        let ratios: Vec<String> = c[4..4 + runs].iter().map(|x| if x.is_empty() { Ok("–".to_string()) } else { number(x).map(|v| format!("{v:.2}")) }).collect::<Result<_, _>>()?;
+        let costs = &c[4 + runs..];
+        let fits = if costs[0].is_empty() {
+            "– | –".to_string()
+        } else {
+            format!("{:.3} / {:.3} | {:.2} / {:.2}", number(costs[0])?, number(costs[1])?, number(costs[2])?, number(costs[3])?)
+        };
+        rows.push(format!("| {} | {} | {} | {} | {fits} |", c[0], c[1], c[2], ratios.join(" | ")));
+    }
+    Ok(rows)
+}
+
+/// The table rows between `<!-- speed-vs-error:start -->` and its end marker.
+fn error_rows_of_page(page: &str) -> Vec<String> {
+    let Some(start) = page.find("<!-- speed-vs-error:start -->") else { return Vec::new() };
+    let Some(len) = page[start..].find("<!-- speed-vs-error:end -->") else { return Vec::new() };
+    page[start..start + len].lines().filter(|l| l.starts_with("| ") && !l.starts_with("| case ")).map(str::to_string).collect()
+}
+
+/// The error page's table is its CSV, digit for digit (the script pastes it from a run or
+/// from the CSV; both must give the same table), and names the CSV's date, commit and CPU.
+#[test]
+fn the_error_table_is_its_csv() {
+    let csv = std::fs::read_to_string(root().join("docs/validation/speed-vs-error.csv")).unwrap();
+    let page = std::fs::read_to_string(root().join("docs/validation/speed-vs-error.md")).unwrap();
+    let from_csv = error_rows_of_csv(&csv).unwrap_or_else(|e| panic!("docs/validation/speed-vs-error.csv: {e}"));
+    let on_page = error_rows_of_page(&page);
+    assert!(!on_page.is_empty(), "docs/validation/speed-vs-error.md: no table between the speed-vs-error markers");
+    for (i, (a, b)) in from_csv.iter().zip(&on_page).enumerate() {
+        assert_eq!(a, b, "docs/validation/speed-vs-error.md: table row {} is not the CSV's (regenerate with validation/speed_vs_error.py --from-csv docs/validation/speed-vs-error.csv --paste)", i + 1);
+    }
+    assert_eq!(from_csv.len(), on_page.len(), "docs/validation/speed-vs-error.md: {} table rows, the CSV has {}", on_page.len(), from_csv.len());
+    let meta = csv.lines().next().unwrap();
+    let field = |k: &str| meta.split("; ").find_map(|kv| kv.trim_start_matches("# ").strip_prefix(&format!("{k}="))).map(str::to_string);
+    let sentence = format!("Measured {} at commit {} on {}.", field("date").unwrap(), field("commit").unwrap(), field("cpu").unwrap());
+    assert!(page.contains(&sentence), "docs/validation/speed-vs-error.md does not say \"{sentence}\" (the CSV's provenance)");
+}
+
+#[test]
+fn the_error_table_check_catches_a_changed_digit() {
+    let csv = "# date=2026-11-29; commit=abc; cpu=X\ncase,backend,reference,hemisphere,run1,fixed_s_ours,fixed_s_ref,ms_per_spp_ours,ms_per_spp_ref\nA,native,cycles,0,0.4250,0.0500,0.0010,21.9700,18.2500\nB,native,mitsuba,0,0.1200,,,,\n";
+    let rows = error_rows_of_csv(csv).unwrap();
+    // 0.4250 is stored as 0.42499999…: it rounds down, as Python's format does.
+    assert_eq!(rows, ["| A | native | cycles | 0.42 | 0.050 / 0.001 | 21.97 / 18.25 |", "| B | native | mitsuba | 0.12 | – | – |"]);
+    let page = format!("<!-- speed-vs-error:start -->\n| case | ours |\n{}\n{}\n<!-- speed-vs-error:end -->", rows[0].replace("0.42", "0.43"), rows[1]);
+    assert_ne!(error_rows_of_page(&page), rows);
+    assert!(error_rows_of_csv("case,backend\nA,b\n").is_err());
+}

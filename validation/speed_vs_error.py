@@ -31,9 +31,15 @@ def load(path):
     return s, rows
 
 
+def kept(x):
+    """`x` at the CSV's precision, so that tables made from runs and from the CSV are the same."""
+    return float(f"{x:.4f}")
+
+
 def table_rows(runs):
     """One dict per (case, backend, reference): the ratio of each run (None where a run has
-    none), whether the row is a `-H` one, and the last run's fixed and per-spp costs."""
+    none), whether the row is a `-H` one, and the last run's fixed and per-spp costs, all at
+    the CSV's precision."""
     out = {}
     for i, (_, rows) in enumerate(runs):
         for r in rows:
@@ -41,10 +47,10 @@ def table_rows(runs):
             row = out.setdefault(k, {"case": k[0], "backend": k[1], "reference": k[2], "ratios": [None] * len(runs),
                                      "hemisphere": "-H" in r.get("flags", []), "costs": None})
             eq = r.get("equal_time_rel_mse_ratio")
-            row["ratios"][i] = eq["ratio"] if eq else None
+            row["ratios"][i] = kept(eq["ratio"]) if eq else None
             if r.get("timing") and r["timing"]["reference"]:
                 t = r["timing"]
-                row["costs"] = (t["ours"]["fixed_seconds"], t["reference"]["fixed_seconds"], 1e3 * t["ours"]["seconds_per_spp"], 1e3 * t["reference"]["seconds_per_spp"])
+                row["costs"] = tuple(kept(c) for c in (t["ours"]["fixed_seconds"], t["reference"]["fixed_seconds"], 1e3 * t["ours"]["seconds_per_spp"], 1e3 * t["reference"]["seconds_per_spp"]))
     return list(out.values())
 
 
