@@ -188,6 +188,10 @@ impl<const W: usize> WideBvh<W> {
         if options.expected_rays == 0 {
             return plain;
         }
+        let sah = plain.sah();
+        if let Some(needed_rays) = split_choice::beyond_reach(sah.nodes + sah.leaves, prims.len(), options.expected_rays) {
+            return WideBvh { splits: SplitOutcome::NotTried { expected_rays: options.expected_rays, needed_rays }, ..plain };
+        }
         let sample = plain.sample(sample::SAMPLE_RAYS);
         let plain_work = plain.work(&sample);
         let needed_rays = split_choice::rays_to_repay(&plain_work, prims.len());
