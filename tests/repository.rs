@@ -148,14 +148,19 @@ fn the_scenes_are_the_files_their_provenance_page_names() {
 /// The "Measured DATE at commit X on CPU." sentences of the README's three
 /// generated tables (bench, error at equal time, verdicts), in that order;
 /// `None` for a table missing its markers or its sentence.
+/// The text from `<!-- NAME:start` to `<!-- NAME:end -->` (the generated tables' markers).
+fn marked<'a>(text: &'a str, name: &str) -> Option<&'a str> {
+    let start = text.find(&format!("<!-- {name}:start"))?;
+    let len = text[start..].find(&format!("<!-- {name}:end -->"))?;
+    Some(&text[start..start + len])
+}
+
 fn headline_provenance(readme: &str) -> Vec<Option<String>> {
     let sentence = Regex::new(r"Measured \d{4}-\d{2}-\d{2} at commit ([^ ]+) on ([^.\n]+)\.").unwrap();
     ["bench", "speed-vs-error", "verdicts"]
         .iter()
         .map(|name| {
-            let start = readme.find(&format!("<!-- {name}:start"))?;
-            let end = start + readme[start..].find(&format!("<!-- {name}:end -->"))?;
-            let found: Vec<String> = sentence.captures_iter(&readme[start..end]).map(|c| format!("commit {} on {}", &c[1], &c[2])).collect();
+            let found: Vec<String> = sentence.captures_iter(marked(readme, name)?).map(|c| format!("commit {} on {}", &c[1], &c[2])).collect();
             (found.len() == 1).then(|| found[0].clone())
         })
         .collect()
@@ -229,9 +234,8 @@ fn error_rows_of_csv(csv: &str) -> Result<Vec<String>, String> {
 
 /// The table rows between `<!-- speed-vs-error:start -->` and its end marker.
 fn error_rows_of_page(page: &str) -> Vec<String> {
-    let Some(start) = page.find("<!-- speed-vs-error:start -->") else { return Vec::new() };
-    let Some(len) = page[start..].find("<!-- speed-vs-error:end -->") else { return Vec::new() };
-    page[start..start + len].lines().filter(|l| l.starts_with("| ") && !l.starts_with("| case ")).map(str::to_string).collect()
+    let Some(table) = marked(page, "speed-vs-error") else { return Vec::new() };
+    table.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| case ")).map(str::to_string).collect()
 }
 
 /// The error page's table is its CSV, digit for digit (the script pastes it from a run or

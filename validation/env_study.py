@@ -61,10 +61,11 @@ def write_square(path):
     s = re.sub(r'<geometry id="Sphere2-data".*?</geometry>', "", s, count=1, flags=re.S)
     i, j = s.index("<visual_scene"), s.index("</visual_scene>")
     body = s[i:j]
-    nodes = re.findall(r'<node id="([^"]+)".*?</node>', body, re.S)
-    for m in re.finditer(r'<node id="([^"]+)".*?</node>', s[i:j], re.S):
+    nodes = list(re.finditer(r'<node id="([^"]+)".*?</node>', body, re.S))
+    for m in nodes:
         if m.group(1) not in ("Sphere2", "Camera"):
             body = body.replace(m.group(0), "")
+    nodes = [m.group(1) for m in nodes]
     body = body.replace("1 0 0 0.4 0 1 0 -0.3 0 0 1 0.3 0 0 0 1", "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1")
     assert "Sphere2" in nodes and "Camera" in nodes, "the template's nodes changed"
     with open(path, "w") as f:
@@ -124,10 +125,12 @@ def main():
         closed = albedo / np.pi * irradiance(env, normal / np.linalg.norm(normal), s)
         print(f"closed form, {s}x{s} points per texel: {closed}")
 
+    def line(name, m, se):
+        print(f"{name:8s} " + "  ".join(f"{(m[c] / closed[c] - 1) * 1e4:+6.2f} +- {se[c] / closed[c] * 1e4:4.2f}" for c in range(3)) + "   (x 1e-4, R G B)")
+
     def report(name, images):
         means = np.array([i[BLOCK].mean((0, 1)) for i in images])
-        m, se = means.mean(0), means.std(0, ddof=1) / np.sqrt(len(means))
-        print(f"{name:8s} " + "  ".join(f"{(m[c] / closed[c] - 1) * 1e4:+6.2f} +- {se[c] / closed[c] * 1e4:4.2f}" for c in range(3)) + "   (x 1e-4, R G B)")
+        line(name, means.mean(0), means.std(0, ddof=1) / np.sqrt(len(means)))
 
     report("ours", [read_exr(f) for f in sorted(glob.glob(os.path.join(case, "native_img_b*[0-9].exr")))])
     cache = os.path.join(run, "cache")
@@ -136,10 +139,8 @@ def main():
         report("cycles", [read_exr(f) for f in cycles])
     for f in glob.glob(os.path.join(cache, "mitsuba_*_m1_*[0-9].exr")):
         mean, var = read_exr(f)[BLOCK], read_exr(f[:-4] + "_var.exr")[BLOCK]
-        m = mean.mean((0, 1))
         # The pixels' variances of the mean, summed: pixels of independent samples.
-        se = np.sqrt(var.sum((0, 1))) / (mean.shape[0] * mean.shape[1])
-        print("mitsuba  " + "  ".join(f"{(m[c] / closed[c] - 1) * 1e4:+6.2f} +- {se[c] / closed[c] * 1e4:4.2f}" for c in range(3)) + "   (x 1e-4, R G B)")
+        line("mitsuba", mean.mean((0, 1)), np.sqrt(var.sum((0, 1))) / (mean.shape[0] * mean.shape[1]))
 
 
 if __name__ == "__main__":

@@ -31,9 +31,14 @@ def load(path):
     return s, rows
 
 
+def csv_number(x):
+    """`x` as the CSV writes it (4 decimals)."""
+    return f"{x:.4f}"
+
+
 def kept(x):
     """`x` at the CSV's precision, so that tables made from runs and from the CSV are the same."""
-    return float(f"{x:.4f}")
+    return float(csv_number(x))
 
 
 def table_rows(runs):
@@ -67,8 +72,8 @@ def write_csv(path, rows, meta):
         runs = len(rows[0]["ratios"]) if rows else 0
         f.write("case,backend,reference,hemisphere," + ",".join(f"run{i + 1}" for i in range(runs)) + ",fixed_s_ours,fixed_s_ref,ms_per_spp_ours,ms_per_spp_ref\n")
         for r in rows:
-            ratios = ["" if x is None else f"{x:.4f}" for x in r["ratios"]]
-            costs = ["", "", "", ""] if r["costs"] is None else [f"{c:.4f}" for c in r["costs"]]
+            ratios = ["" if x is None else csv_number(x) for x in r["ratios"]]
+            costs = ["", "", "", ""] if r["costs"] is None else [csv_number(c) for c in r["costs"]]
             f.write(",".join([r["case"], r["backend"], r["reference"], "1" if r["hemisphere"] else "0"] + ratios + costs) + "\n")
 
 
