@@ -12,7 +12,9 @@ of the square sees the whole sky above its plane and nothing else, so its radian
 over the map's bilinear lookup (texel centres at half-integers, wrapping in u, clamped in v:
 the renderer's own model), integrated by a midpoint rule at S x S points per texel (S = 2, 4,
 8 printed: the sum has converged when they agree). The harness (`run_cases.py full --scene`)
-renders the square with ours and each reference from the same export; this compares the
+renders the square with ours and each reference from the same export (Cycles, whose exporter
+refuses environment maps because of this study, from the same export with --environment-map
+at the tier's reference sampling); this compares the
 central block of each image (pixels well inside the square) with the closed form, per channel,
 as (image / closed form - 1) +- its standard error, in parts in 10^4.
 
@@ -27,6 +29,7 @@ import glob
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 
@@ -35,6 +38,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
+from cases import TIERS  # noqa: E402
 from images import read_exr  # noqa: E402
 
 # The block of pixels inside the square at the harness's 256x192 (rows, columns).
@@ -134,9 +138,19 @@ def main():
 
     report("ours", [read_exr(f) for f in sorted(glob.glob(os.path.join(case, "native_img_b*[0-9].exr")))])
     cache = os.path.join(run, "cache")
-    cycles = sorted(glob.glob(os.path.join(cache, "cycles_*_radiance_m1_*_r*.exr")))
-    if cycles:
-        report("cycles", [read_exr(f) for f in cycles])
+    # The harness's Cycles exporter refuses environment maps (this study is why); rendered
+    # here anyway, from the same export at the tier's reference sampling.
+    blender = shutil.which("blender")
+    if blender:
+        t = TIERS["full"]
+        prefix = os.path.join(run, "cycles_environment_map")
+        subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--",
+                        os.path.join(case, "scene"), "--mode", "radiance", "--environment-map", "--max-depth", "1", "--spp", str(t["ref_spp"]),
+                        "--renders", str(t["ref_renders"]), "--out", prefix], check=True, capture_output=True)
+        with open(prefix + "_cycles.json") as f:
+            report("cycles", [read_exr(r["file"]) for r in json.load(f)["renders"]])
+    else:
+        print("cycles   not installed (validation/setup installs Debian's blender)")
     for f in glob.glob(os.path.join(cache, "mitsuba_*_m1_*[0-9].exr")):
         mean, var = read_exr(f)[BLOCK], read_exr(f[:-4] + "_var.exr")[BLOCK]
         # The pixels' variances of the mean, summed: pixels of independent samples.
