@@ -11,6 +11,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
+# The reference renderers too, before the suite: tests/reference_exporters.rs runs Cycles' exporter.
+bash validation/setup
 
 echo "== test suite (with Embree 3 and Embree 4) =="
 # With the peer BVH libraries built in (tests/peers.rs checks they answer as native does).
