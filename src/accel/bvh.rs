@@ -11,8 +11,10 @@ use crate::geometry::Aabb;
 use glam::Vec4;
 use rayon::prelude::*;
 
+mod binning;
 mod partition;
 mod spatial;
+use binning::{area_scale, find_split, Binning};
 use partition::partition;
 
 /// At most this many primitives per leaf; below it the SAH decides.
@@ -25,19 +27,6 @@ pub(super) const MAX_LEAF: usize = 8;
 /// those sets was ~7 % of the build (1 thread: sphere 229 -> 213 ms,
 /// subdivided bunny 517 -> 488).
 const LEAF_ALWAYS: usize = BLOCK;
-/// Bins per axis: few for small nodes, where filling and sweeping the bins
-/// costs more than it buys, many near the root, where split quality
-/// matters most. Like Embree's `min(32, 4 + 0.05 n)`, in four steps; with
-/// 16 bins everywhere the 1M-triangle build spent a third of its time
-/// clearing and sweeping bins of nodes with a handful of triangles.
-fn bins_for(n: usize) -> usize {
-    match n {
-        0..80 => 4,
-        80..240 => 8,
-        240..560 => 16,
-        _ => 32,
-    }
-}
 /// Cost of a binary split relative to one block test, for the SAH. About
 /// three binary splits make one 8-wide node visit, so a full node visit's
 /// cost of 1 would overcharge them: with 1.0 the 1M-triangle tree's leaves
@@ -313,205 +302,6 @@ fn ref_bounds(refs: &[PrimRef]) -> (Box4, Box4) {
     } else {
         one(refs)
     }
-}
-
-/// Maps doubled centroids to bins, all three axes at once. Axes without
-/// extent get scale 0 (everything in bin 0) and are skipped by the sweep.
-struct Binning {
-    lo: Vec4,
-    scale: Vec4,
-    last: f32,
-}
-
-impl Binning {
-    fn new(cbounds: &Box4, bins: usize) -> Binning {
-        let extent = cbounds.hi - cbounds.lo;
-        let b = bins as f32;
-        let scale = Vec4::new(
-            if extent.x > 0.0 { b / extent.x } else { 0.0 },
-            if extent.y > 0.0 { b / extent.y } else { 0.0 },
-            if extent.z > 0.0 { b / extent.z } else { 0.0 },
-            0.0,
-        );
-        Binning { lo: cbounds.lo, scale, last: b - 1.0 }
-    }
-
-    /// Bin per axis: `trunc((c - lo) * scale)` clamped to `0..bins`.
-    #[inline]
-    fn bin(&self, c: Vec4) -> [usize; 3] {
-        // Clamp as floats (centroids are finite and not below `lo`, so `x`
-        // is too), then convert with one truncating SIMD instruction; glam's
-        // `as_ivec4` converts lane by lane with saturation checks, which
-        // took 40 % of the partition's time.
-        let x = ((c - self.lo) * self.scale).max(Vec4::ZERO).min(Vec4::splat(self.last));
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::*;
-            let mut i = [0i32; 4];
-            // SAFETY: SSE2 is part of x86-64; `i` has room for 4 lanes.
-            unsafe { _mm_storeu_si128(i.as_mut_ptr() as *mut __m128i, _mm_cvttps_epi32(x.into())) };
-            [i[0] as usize, i[1] as usize, i[2] as usize]
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            [x.x as usize, x.y as usize, x.z as usize]
-        }
-    }
-
-    /// A test of whether a centroid falls in bin `bin` or below on `axis`,
-    /// as `bin` decides it (`trunc(x) <= bin` is `x < bin + 1` for `x >= 0`).
-    fn left_of(&self, axis: usize, bin: usize) -> LeftOf {
-        LeftOf { lo: self.lo, scale: self.scale, limit: Vec4::splat((bin + 1) as f32), axis }
-    }
-}
-
-/// See `Binning::left_of`. All lanes are computed and the axis's lane's
-/// comparison picked from the sign mask: indexing a `Vec4` by a run-time
-/// axis compiled to a jump table in the partition's inner loop.
-struct LeftOf {
-    lo: Vec4,
-    scale: Vec4,
-    limit: Vec4,
-    axis: usize,
-}
-
-impl LeftOf {
-    #[inline]
-    fn test(&self, c: Vec4) -> bool {
-        let below = ((c - self.lo) * self.scale).cmplt(self.limit).bitmask();
-        below >> self.axis & 1 != 0
-    }
-}
-
-/// Per axis, how many centroids fall in each bin and the union of their boxes.
-#[derive(Clone, Copy)]
-struct Bins<const N: usize> {
-    counts: [[u32; N]; 3],
-    boxes: [[Box4; N]; 3],
-}
-
-impl<const N: usize> Bins<N> {
-    const EMPTY: Bins<N> = Bins { counts: [[0; N]; 3], boxes: [[Box4::EMPTY; N]; 3] };
-
-    fn fill(refs: &[PrimRef], b: &Binning) -> Bins<N> {
-        let mut bins = Bins::EMPTY;
-        for r in refs {
-            let idx = b.bin(r.centroid2());
-            let rb = Box4::of(r);
-            for axis in 0..3 {
-                let i = idx[axis];
-                bins.counts[axis][i] += 1;
-                bins.boxes[axis][i] = bins.boxes[axis][i].union(rb);
-            }
-        }
-        bins
-    }
-
-    fn merge(mut self, o: Bins<N>) -> Bins<N> {
-        for axis in 0..3 {
-            for i in 0..N {
-                self.counts[axis][i] += o.counts[axis][i];
-                self.boxes[axis][i] = self.boxes[axis][i].union(o.boxes[axis][i]);
-            }
-        }
-        self
-    }
-}
-
-/// The best binned-SAH object split of a set: centroids in bins up to
-/// `bin` (of `bins`) on `axis` go left. `cost` is in units of one block
-/// test, with areas measured in units of `scale` (`parent_area` the set's
-/// own); `overlap` is the part of the set's area where the two sides'
-/// boxes overlap (spatial splits are tried where it is large; 0 where
-/// `find_split` was not asked for it).
-struct ObjectSplit {
-    axis: usize,
-    bin: usize,
-    bins: usize,
-    cost: f32,
-    overlap: f32,
-    scale: f32,
-    parent_area: f32,
-}
-
-/// A power of two near 1 / (the box's largest extent): exact, so the
-/// costs (and the tree) are those of the unscaled arithmetic wherever that
-/// did not overflow.
-fn area_scale(bounds: &Box4) -> f32 {
-    let size = (bounds.hi - bounds.lo).truncate().max_element();
-    let exp = (size.to_bits() >> 23) & 0xff;
-    if size > 0.0 && exp < 254 {
-        f32::from_bits((254 - exp) << 23)
-    } else {
-        1.0
-    }
-}
-
-/// Best binned-SAH object split, or `None` when the centroids do not
-/// divide (all in one bin on every axis). Its sides' `overlap` is measured
-/// only when asked for (`with_overlap`: spatial splits may follow), so the
-/// default build does not pay for it.
-fn find_split(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4, with_overlap: bool) -> Option<ObjectSplit> {
-    match bins_for(refs.len()) {
-        4 => find_split_in::<4>(refs, bounds, cbounds, with_overlap),
-        8 => find_split_in::<8>(refs, bounds, cbounds, with_overlap),
-        16 => find_split_in::<16>(refs, bounds, cbounds, with_overlap),
-        _ => find_split_in::<32>(refs, bounds, cbounds, with_overlap),
-    }
-}
-
-fn find_split_in<const N: usize>(refs: &[PrimRef], bounds: &Box4, cbounds: &Box4, with_overlap: bool) -> Option<ObjectSplit> {
-    let n = refs.len();
-    let scale = area_scale(bounds);
-    let parent_area = bounds.half_area_scaled(scale).max(f32::MIN_POSITIVE);
-    let extent = cbounds.hi - cbounds.lo;
-    let binning = Binning::new(cbounds, N);
-    let bins = if n > PARALLEL_BINNING {
-        refs.par_chunks(BIN_CHUNK).map(|c| Bins::<N>::fill(c, &binning)).reduce(|| Bins::EMPTY, Bins::merge)
-    } else {
-        Bins::<N>::fill(refs, &binning)
-    };
-    let mut best: Option<(usize, usize, f32)> = None;
-    for axis in 0..3 {
-        if !(extent[axis] > 0.0) {
-            continue;
-        }
-        let (counts, boxes) = (&bins.counts[axis], &bins.boxes[axis]);
-        // Sweep from the right to get the area*blocks of every right side.
-        let mut right_cost = [0.0f32; N];
-        let mut acc = Box4::EMPTY;
-        let mut cnt = 0;
-        for i in (1..N).rev() {
-            acc = acc.union(boxes[i]);
-            cnt += counts[i] as usize;
-            right_cost[i] = if cnt > 0 { acc.half_area_scaled(scale) * blocks(cnt) } else { 0.0 };
-        }
-        let mut acc = Box4::EMPTY;
-        let mut cnt = 0;
-        for i in 0..N - 1 {
-            acc = acc.union(boxes[i]);
-            cnt += counts[i] as usize;
-            if cnt == 0 || cnt == n {
-                continue;
-            }
-            let cost = TRAVERSAL_COST + (acc.half_area_scaled(scale) * blocks(cnt) + right_cost[i + 1]) / parent_area;
-            if best.map_or(true, |b| cost < b.2) {
-                best = Some((axis, i, cost));
-            }
-        }
-    }
-    let (axis, bin, cost) = best?;
-    let overlap = if with_overlap {
-        // The chosen sides' boxes, for their overlap.
-        let (boxes, split) = (&bins.boxes[axis], bin + 1);
-        let left = boxes[..split].iter().fold(Box4::EMPTY, |a, b| a.union(*b));
-        let right = boxes[split..].iter().fold(Box4::EMPTY, |a, b| a.union(*b));
-        let both = Box4 { lo: left.lo.max(right.lo), hi: left.hi.min(right.hi) };
-        both.half_area_scaled(scale) / parent_area
-    } else {
-        0.0
-    };
-    Some(ObjectSplit { axis, bin, bins: N, cost, overlap, scale, parent_area })
 }
 
 #[cfg(test)]

@@ -16,34 +16,50 @@ pub(super) struct SahCost {
     pub(super) leaves: f64,
 }
 
+/// Nodes per parallel chunk of `sah`'s sum.
+const SAH_CHUNK: usize = 1 << 13;
+
 impl<const W: usize> WideBvh<W> {
     /// SAH cost of the built tree, as Embree's BVH statistics (`verbose=2`)
     /// count it: expected node visits and expected 4-triangle group (or
     /// sphere) tests for a ray through the root's box, traversal and
     /// intersection costs both 1.
+    ///
+    /// Every node of the arrays is in the tree once, so the sum runs over
+    /// the arrays in order, in parallel over fixed chunks (the same sum at
+    /// any thread count), rather than down the tree: 11 ms of the 1.8M
+    /// subdivided bunny's build walking it, 1.3 ms this way (2 threads).
     pub(super) fn sah(&self) -> SahCost {
-        if self.tree.root == EMPTY {
+        use rayon::prelude::*;
+        let t = &self.tree;
+        if t.root == EMPTY {
             return SahCost::default();
         }
-        self.sah_cost(self.tree.root, self.tree.root_area)
-    }
-
-    /// Surface-area-weighted cost of the subtree `code` (whose box has half
-    /// area `area`), relative to a root of half area `root`.
-    fn sah_cost(&self, code: u32, root: f64) -> SahCost {
-        let root = root.max(f64::MIN_POSITIVE);
-        let mut cost = SahCost::default();
-        let mut stack = vec![(code, root)];
-        while let Some((c, area)) = stack.pop() {
-            if c & LEAF_BIT != 0 {
-                let l = self.leaf_of(c);
-                cost.leaves += area / root * (l.n_groups + l.n_spheres) as f64;
-                continue;
-            }
-            cost.nodes += area / root; // one visit tests all W child boxes
-            stack.extend(self.child_areas(c));
+        let root = t.root_area.max(f64::MIN_POSITIVE);
+        if t.root & LEAF_BIT != 0 {
+            let l = self.leaf_of(t.root);
+            return SahCost { nodes: 0.0, leaves: (l.n_groups + l.n_spheres) as f64 };
         }
-        cost
+        let n = t.nodes.len();
+        let parts: Vec<SahCost> = (0..n.div_ceil(SAH_CHUNK))
+            .into_par_iter()
+            .map(|k| {
+                let mut cost = SahCost::default();
+                for i in k * SAH_CHUNK..n.min((k + 1) * SAH_CHUNK) {
+                    for (c, area) in self.child_areas(i as u32) {
+                        if c & LEAF_BIT != 0 {
+                            let l = self.leaf_of(c);
+                            cost.leaves += area / root * (l.n_groups + l.n_spheres) as f64;
+                        } else {
+                            cost.nodes += area / root;
+                        }
+                    }
+                }
+                cost
+            })
+            .collect();
+        // The root's own visit, then the chunks in order.
+        parts.iter().fold(SahCost { nodes: 1.0, leaves: 0.0 }, |a, b| SahCost { nodes: a.nodes + b.nodes, leaves: a.leaves + b.leaves })
     }
 
     /// The children of node `code`: (child code, half area of its box).

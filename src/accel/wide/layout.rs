@@ -347,8 +347,20 @@ fn write_leaves<const W: usize>(
     let (mut g, mut r, mut s) = (0usize, 0usize, 0usize);
     let mut codes = Vec::with_capacity(p.part.leaves.len());
     let mut sorted: Vec<(f32, Prim)> = Vec::new();
-    for leaf in &p.part.leaves {
-        let run = &refs[leaf.first as usize..leaf.first as usize + leaf.count as usize];
+    let leaves = &p.part.leaves;
+    let run_of = |l: &Pending| &refs[l.first as usize..l.first as usize + l.count as usize];
+    for (k, leaf) in leaves.iter().enumerate() {
+        // The triangles come from the scene's meshes in build order, far
+        // apart in memory: their indices are fetched 8 leaves ahead and
+        // their vertices 4 ahead.
+        for (ahead, vertices) in [(8, false), (4, true)] {
+            if let Some(l) = leaves.get(k + ahead) {
+                for r in run_of(l) {
+                    prims.prefetch(r.index(), vertices);
+                }
+            }
+        }
+        let run = run_of(leaf);
         let (group, sphere) = (base.groups + g as u32, base.spheres + s as u32);
         // Largest triangles first: a shadow packet tests its rays against
         // a leaf's triangles one at a time (`leaf_rays_x8`) and stops once

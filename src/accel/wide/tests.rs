@@ -430,6 +430,26 @@ fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
         v
     };
     assert!(bits(&one) == bits(&two), "the layout depends on the thread count");
+    // The SAH cost summed over the arrays in chunks is the walk down the
+    // tree's (to rounding), and the same at any thread count.
+    assert!(one.tree.nodes.len() > 8192, "more than one chunk of `sah`'s sum");
+    let walked = {
+        let root = one.tree.root_area;
+        let (mut nodes, mut leaves, mut stack) = (0.0f64, 0.0f64, vec![(one.tree.root, root)]);
+        while let Some((c, area)) = stack.pop() {
+            if c & LEAF_BIT != 0 {
+                let l = one.leaf_of(c);
+                leaves += area / root * (l.n_groups + l.n_spheres) as f64;
+            } else {
+                nodes += area / root;
+                stack.extend(one.child_areas(c));
+            }
+        }
+        (nodes, leaves)
+    };
+    let (a, b) = (rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| one.sah()), two.sah());
+    assert_eq!((a.nodes.to_bits(), a.leaves.to_bits()), (b.nodes.to_bits(), b.leaves.to_bits()));
+    assert!((a.nodes / walked.0 - 1.0).abs() < 1e-12 && (a.leaves / walked.1 - 1.0).abs() < 1e-12, "{a:?} against {walked:?}");
     let brute = BruteForce::new(&shapes);
     let mut rays = camera_rays(&Camera::from_scene(&scene), 40, 30);
     rays.extend(random_rays(&scene, 1500, 11));
