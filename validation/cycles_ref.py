@@ -246,7 +246,30 @@ def camera_only_emitter(name, radiance):
     return mat
 
 
-def add_mesh(name, verts, normals, faces, mat):
+# The largest distance between one of our vertex normals and the corner normal Blender keeps for
+# it (set for the normal pass, see split_normal_deviation).
+NORMAL_DEVIATION = [0.0]
+
+
+def split_normal_deviation(me, normals):
+    """How far Blender's corner normals are from ours: it stores custom split normals compressed
+    (two 16-bit angles per corner in a per-fan space), so they come back off by up to a few
+    1e-4 (bunny_unlit: 6.7e-4 at most, 5e-5 on average). The normal check allows this much."""
+    me.calc_normals_split()
+    got = [0.0] * (3 * len(me.loops))
+    me.loops.foreach_get("normal", got)
+    vi = [0] * len(me.loops)
+    me.loops.foreach_get("vertex_index", vi)
+    worst = 0.0
+    for k, v in enumerate(vi):
+        n = normals[v]
+        length = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) or 1.0
+        d = sum((got[3 * k + a] - n[a] / length) ** 2 for a in range(3))
+        worst = max(worst, d)
+    return math.sqrt(worst)
+
+
+def add_mesh(name, verts, normals, faces, mat, measure_normals=False):
     me = bpy.data.meshes.new(name)
     me.from_pydata(verts, [], faces)
     me.validate(clean_customdata=False)
@@ -254,6 +277,8 @@ def add_mesh(name, verts, normals, faces, mat):
     # Our shading normals (CS184's area-weighted vertex normals), not Blender's.
     me.use_auto_smooth = True
     me.normals_split_custom_set_from_vertices(normals)
+    if measure_normals:
+        NORMAL_DEVIATION[0] = max(NORMAL_DEVIATION[0], split_normal_deviation(me, normals))
     me.materials.append(mat)
     ob = bpy.data.objects.new(name, me)
     # Cycles moves the shadow rays of smooth-shaded triangles off the surface towards where
@@ -393,7 +418,7 @@ def build(spec, folder, mode, smooth_glass=False, environment_map=False):
                     refuse(f"shape {s['id']}: point lights both in the plane of the emissive rectangle and behind it")
                 shadow_blind.append(name)
         if s["type"] == "mesh":
-            ob = add_mesh(name, verts, normals, faces, mat)
+            ob = add_mesh(name, verts, normals, faces, mat, measure_normals=mode == "normal")
             if name in shadow_blind:
                 ob.visible_shadow = False
         elif s["type"] == "sphere":
@@ -555,7 +580,8 @@ def main():
         spec = json.load(f)
     w, h = build(spec, args.scene, args.mode, args.smooth_glass, args.environment_map)
     configure(w, h, args.mode, args.max_depth, args.threads)
-    meta = {"renderer": f"cycles (blender {bpy.app.version_string})", "mode": args.mode, "spp_per_render": args.spp, "renders": [], "ladder": []}
+    meta = {"renderer": f"cycles (blender {bpy.app.version_string})", "mode": args.mode, "spp_per_render": args.spp, "renders": [], "ladder": [],
+            "normal_deviation": NORMAL_DEVIATION[0]}
     # The first render in a Blender process pays one-time costs (kernel and image set-up): one
     # untimed 1-spp render first, so neither the renders nor the ladder carry them.
     render(f"{args.out}_warmup.exr", 1, 0)

@@ -57,7 +57,10 @@ def geometry_vs_cycles(cid, name, backend, ours, cyc, folder, cam):
     normal are tested on interior pixels by the per-pixel Welch z (stats.verdict's pixel rule:
     Šidák alpha 0.01, pass at >= 99.75 % of pixel-channels); their in-pixel averages differ by
     sampling only. Cycles orients its normal pass towards the camera; ours is the normal as
-    the mesh winds it, so ours is flipped where it faces away from the camera ray."""
+    the mesh winds it, so ours is flipped where it faces away from the camera ray. Blender keeps
+    our vertex normals compressed, off by up to a distance cycles_ref.py measures on the scene's
+    meshes (`normal_deviation`, a few 1e-4 on smooth meshes); an interpolated normal is off by
+    no more, so the normal test counts only the part of a difference beyond it."""
     x_id, var_id, xs_id = ours["object-id"]
     c_id = cyc["object-id"]
     if any("refused" in c for c in cyc.values()):
@@ -101,7 +104,8 @@ def geometry_vs_cycles(cid, name, backend, ours, cyc, folder, cam):
         # to f32 rounding (the encoding n*0.5+0.5 leaves 1e-7 in zero components), so the
         # estimated variances can be 0 or 1e-14; 1e-6 of the image's scale stands for that.
         scale = float(np.median(np.abs(r[interior]).max(-1))) if interior.any() else 1.0
-        z = np.abs(x - r) / np.sqrt(var_x + var_r + (1e-6 * scale) ** 2)
+        allowed = cyc["normal"].get("normal_deviation", 0.0) if mode == "normal" else 0.0
+        z = np.maximum(np.abs(x - r) - allowed, 0.0) / np.sqrt(var_x + var_r + (1e-6 * scale) ** 2)
         crit = stats.z_critical(int(sel.sum()))
         good = (z <= crit)[sel]
         frac = float(good.mean()) if good.size else 1.0
@@ -110,6 +114,8 @@ def geometry_vs_cycles(cid, name, backend, ours, cyc, folder, cam):
                                         "z": z.reshape(-1, 3)[i].tolist()} for i in worst if sel.reshape(-1, 3)[i].any()]
         out[f"{mode}_pass_fraction"] = frac
         out[f"{mode}_max_abs_diff"] = float(np.abs(x - r)[sel].max()) if sel.any() else 0.0
+        if mode == "normal":
+            out["normal_allowed"] = allowed
         ok &= frac >= stats.PASS_FRACTION
     write_png(os.path.join(folder, "cycles_ids.png"), c_id["mean"])
     write_png(os.path.join(folder, f"{backend}_avg_ids.png"), x_id)

@@ -44,6 +44,13 @@ def region_cell(r):
             f"{g['reference_mean']:.5g}&plusmn;{g['reference_ci95']:.2g}")
 
 
+def efficiency(point):
+    """1 / (relMSE x seconds) of a curve's point; none where the error is 0 (a black image, or
+    one a renderer computes exactly) or the time is."""
+    work = point["rel_mse"] * point["seconds"]
+    return f"{1.0 / work:.3g}" if work > 0 else "–"
+
+
 def write_report(out, summary):
     esc = html.escape
     rad = [r for r in summary["results"] if r["kind"] in ("radiance", "adaptive")]
@@ -103,7 +110,7 @@ def write_report(out, summary):
             best = max(c, key=lambda p: p["spp"])
             eff_rows.append(f"<tr><td>{esc(case)}</td><td>{name}</td><td>{1e3 * fit['fixed_seconds']:.1f}</td><td>{1e3 * fit['seconds_per_spp']:.3f}</td>"
                             f"<td>{best['spp']}</td><td>{best['median_seconds']:.3f}</td><td>{best['seconds']:.3f}</td><td>{best['rel_mse']:.2e}</td>"
-                            f"<td>{1.0/(best['rel_mse']*best['seconds']):.3g}</td></tr>")
+                            f"<td>{efficiency(best)}</td></tr>")
         for r in rs:
             eq = r.get("equal_time_rel_mse_ratio")
             eff_rows.append(f"<tr><td>{esc(case)}</td><td>{r['backend']} ÷ {r['reference']} at equal time</td><td colspan='7'>{'%.2f at %.3f s' % (eq['ratio'], eq['seconds']) if eq else 'no overlapping times'}</td></tr>")

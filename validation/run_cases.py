@@ -213,7 +213,7 @@ class Harness:
         with open(ref + "_cycles.json") as f:
             meta = json.load(f)
         out = from_renders([read_exr(p["file"]) for p in meta["renders"]], meta)
-        return {**out, "renderer": meta["renderer"], "spp": spp * len(out["renders"])}
+        return {**out, "renderer": meta["renderer"], "spp": spp * len(out["renders"]), "normal_deviation": meta.get("normal_deviation", 0.0)}
 
     def reference_ladder(self, rname, scene_dir, m, folder):
         """The reference's error-against-time ladder, rendered and timed afresh on every run
