@@ -11,7 +11,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
-# The reference renderers too, before the suite: tests/reference_exporters.rs runs Cycles' exporter.
+# The reference renderers too, before the suite: tests/harness.rs runs the harness's exporters and statistics.
 bash validation/setup
 
 echo "== test suite (with Embree 3 and Embree 4) =="

@@ -1,8 +1,10 @@
-//! The harness's reference exporters run as the harness runs them, on a
-//! scene exported by `pathtracer export`: what a reference cannot render
-//! exactly is refused with its reason (exit 3, one `cannot represent
-//! exactly` line), what it can is rendered. Needs Blender (Cycles);
-//! where it is not installed the test says so and does not pass silently.
+//! The validation harness's own scripts, run as the harness runs them: its
+//! reference exporters on a scene exported by `pathtracer export` (what a
+//! reference cannot render exactly is refused with its reason: exit 3, one
+//! `cannot represent exactly` line; what it can is rendered), and its
+//! statistics. They need what `validation/setup` installs (Blender, the
+//! virtual environment); where that is missing a test says so and does not
+//! pass silently.
 
 mod common;
 
@@ -78,4 +80,45 @@ fn cycles_refuses_an_environment_map_for_radiance_only() {
     let scene = export(&plain, &[]);
     let out = cycles(&scene, "radiance", &plain.join("radiance"), &[]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// The harness's Welch test (`validation/stats.py`) judges a difference
+/// against Student's t with the variances' degrees of freedom: its tail
+/// probabilities are the t table's; on simulated correct renders whose
+/// reference variance comes from 8 renders it keeps the 99.75 % rule
+/// (where the normal's critical value fails a third of the runs), and it
+/// still fails a render with a few pixels off by 8 standard errors.
+#[test]
+fn the_harness_welch_test_has_students_tails() {
+    let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("validation/.venv/bin/python");
+    if !python.exists() {
+        eprintln!("SKIPPED: validation/.venv is missing (validation/setup makes it); the harness's statistics were not checked");
+        return;
+    }
+    let script = r#"
+import numpy as np, stats
+for nu, t in stats.T_CRIT_001.items():
+    assert abs(stats.t_two_sided_p(t, nu) - 0.01) < 2e-5, (nu, stats.t_two_sided_p(t, nu))
+assert abs(stats.t_two_sided_p(1.959964, 1e7) - 0.05) < 1e-5
+rng = np.random.default_rng(1)
+n, runs = 471, 100
+fail_z = fail_t = 0
+for k in range(runs):
+    renders = rng.normal(0, np.sqrt(8.0), size=(8, n))
+    r, vr = renders.mean(0), renders.var(0, ddof=1) / 8
+    x = rng.normal(0, np.sqrt(0.05), n)
+    vx = 0.05 * rng.chisquare(504, n) / 504
+    z = np.abs(x - r) / np.sqrt(vx + vr)
+    fail_z += np.mean(z <= stats.z_critical(n)) < stats.PASS_FRACTION
+    fail_t += np.mean(stats.welch_ok(x - r, vx, 504, vr, 7, n)) < stats.PASS_FRACTION
+assert fail_t <= 2 and fail_z >= 20, (fail_t, fail_z)
+x = rng.normal(0, np.sqrt(0.05), n)
+x[:5] += 8 * np.sqrt(0.05 + 1.0)
+renders = rng.normal(0, np.sqrt(8.0), size=(8, n))
+ok = stats.welch_ok(x - renders.mean(0), np.full(n, 0.05), 504, renders.var(0, ddof=1) / 8, 7, n)
+assert np.mean(ok) < stats.PASS_FRACTION, np.mean(ok)
+print("ok", fail_t, fail_z)
+"#;
+    let out = Command::new(&python).arg("-c").arg(script).current_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("validation")).output().unwrap();
+    assert!(out.status.success(), "{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
 }
