@@ -55,7 +55,7 @@ fn cycles_refuses_an_environment_map_for_radiance_only() {
         eprintln!("SKIPPED: Blender is not installed (validation/setup installs it); the Cycles exporter's refusals were not checked");
         return;
     }
-    let dir = common::Scratch::new("reference_exporters", "cycles_env");
+    let dir = common::Scratch::new("harness", "cycles_env");
     let map = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/envmaps/studio.exr");
     let scene = export(&dir, &["-e", map.to_str().unwrap()]);
 
@@ -76,7 +76,7 @@ fn cycles_refuses_an_environment_map_for_radiance_only() {
     assert!(dir.join("forced_r0.exr").exists());
 
     // The same scene without the map is not refused.
-    let plain = common::Scratch::new("reference_exporters", "cycles_plain");
+    let plain = common::Scratch::new("harness", "cycles_plain");
     let scene = export(&plain, &[]);
     let out = cycles(&scene, "radiance", &plain.join("radiance"), &[]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
