@@ -27,7 +27,8 @@ def envmap(name):
 
 
 def geometry(scene, ref_shift=None):
-    return {"kind": "geometry", "scene": scene, "ref_shift": ref_shift}
+    """The tag lets `--only _geometry` select the intersection cases alone."""
+    return {"kind": "geometry", "scene": scene, "ref_shift": ref_shift, "tag": "_geometry"}
 
 
 def adaptive(scene, m, refs, batch, tol, bias_runs):
