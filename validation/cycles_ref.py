@@ -246,11 +246,6 @@ def camera_only_emitter(name, radiance):
     return mat
 
 
-# The largest distance between one of our vertex normals and the corner normal Blender keeps for
-# it (set for the normal pass, see split_normal_deviation).
-NORMAL_DEVIATION = [0.0]
-
-
 def split_normal_deviation(me, normals):
     """How far Blender's corner normals are from ours: it stores custom split normals compressed
     (two 16-bit angles per corner in a per-fan space), so they come back off by up to a few
@@ -269,7 +264,7 @@ def split_normal_deviation(me, normals):
     return math.sqrt(worst)
 
 
-def add_mesh(name, verts, normals, faces, mat, measure_normals=False):
+def add_mesh(name, verts, normals, faces, mat):
     me = bpy.data.meshes.new(name)
     me.from_pydata(verts, [], faces)
     me.validate(clean_customdata=False)
@@ -277,8 +272,6 @@ def add_mesh(name, verts, normals, faces, mat, measure_normals=False):
     # Our shading normals (CS184's area-weighted vertex normals), not Blender's.
     me.use_auto_smooth = True
     me.normals_split_custom_set_from_vertices(normals)
-    if measure_normals:
-        NORMAL_DEVIATION[0] = max(NORMAL_DEVIATION[0], split_normal_deviation(me, normals))
     me.materials.append(mat)
     ob = bpy.data.objects.new(name, me)
     # Cycles moves the shadow rays of smooth-shaded triangles off the surface towards where
@@ -364,6 +357,9 @@ def build(spec, folder, mode, smooth_glass=False, environment_map=False):
     bg.inputs["Strength"].default_value = 0.0
 
     shadow_blind = []
+    # For the normal pass: the largest distance between our vertex normals and the corner
+    # normals Blender keeps for them (split_normal_deviation).
+    normal_deviation = 0.0
     for s in spec["shapes"]:
         if not s.get("emission_one_sided", False):
             refuse(f"shape {s['id']}: only one-sided emission is modelled")
@@ -418,7 +414,9 @@ def build(spec, folder, mode, smooth_glass=False, environment_map=False):
                     refuse(f"shape {s['id']}: point lights both in the plane of the emissive rectangle and behind it")
                 shadow_blind.append(name)
         if s["type"] == "mesh":
-            ob = add_mesh(name, verts, normals, faces, mat, measure_normals=mode == "normal")
+            ob = add_mesh(name, verts, normals, faces, mat)
+            if mode == "normal":
+                normal_deviation = max(normal_deviation, split_normal_deviation(ob.data, normals))
             if name in shadow_blind:
                 ob.visible_shadow = False
         elif s["type"] == "sphere":
@@ -505,7 +503,7 @@ def build(spec, folder, mode, smooth_glass=False, environment_map=False):
     co.matrix_world = Matrix(((r.x, u.x, -f.x, o.x), (r.y, u.y, -f.y, o.y), (r.z, u.z, -f.z, o.z), (0, 0, 0, 1)))
     scene.collection.objects.link(co)
     scene.camera = co
-    return cam["width"], cam["height"]
+    return cam["width"], cam["height"], normal_deviation
 
 
 def configure(width, height, mode, max_depth, threads):
@@ -578,10 +576,10 @@ def main():
     args = parse_args(argv)
     with open(os.path.join(args.scene, "scene.json")) as f:
         spec = json.load(f)
-    w, h = build(spec, args.scene, args.mode, args.smooth_glass, args.environment_map)
+    w, h, normal_deviation = build(spec, args.scene, args.mode, args.smooth_glass, args.environment_map)
     configure(w, h, args.mode, args.max_depth, args.threads)
     meta = {"renderer": f"cycles (blender {bpy.app.version_string})", "mode": args.mode, "spp_per_render": args.spp, "renders": [], "ladder": [],
-            "normal_deviation": NORMAL_DEVIATION[0]}
+            "normal_deviation": normal_deviation}
     # The first render in a Blender process pays one-time costs (kernel and image set-up): one
     # untimed 1-spp render first, so neither the renders nor the ladder carry them.
     render(f"{args.out}_warmup.exr", 1, 0)

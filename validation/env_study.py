@@ -40,6 +40,7 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 from cases import TIERS  # noqa: E402
 from images import read_exr  # noqa: E402
+from run_cases import cycles_ref_command  # noqa: E402
 
 # The block of pixels inside the square at the harness's 256x192 (rows, columns).
 BLOCK = (slice(70, 120), slice(90, 166))
@@ -144,9 +145,8 @@ def main():
     if blender:
         t = TIERS["full"]
         prefix = os.path.join(run, "cycles_environment_map")
-        subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--",
-                        os.path.join(case, "scene"), "--mode", "radiance", "--environment-map", "--max-depth", "1", "--spp", str(t["ref_spp"]),
-                        "--renders", str(t["ref_renders"]), "--out", prefix], check=True, capture_output=True)
+        subprocess.run(cycles_ref_command(blender, os.path.join(case, "scene"), "--mode", "radiance", "--environment-map", "--max-depth", "1",
+                                          "--spp", str(t["ref_spp"]), "--renders", str(t["ref_renders"]), "--out", prefix), check=True, capture_output=True)
         with open(prefix + "_cycles.json") as f:
             report("cycles", [read_exr(r["file"]) for r in json.load(f)["renders"]])
     else:

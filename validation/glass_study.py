@@ -45,6 +45,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 from images import read_exr  # noqa: E402
+from run_cases import cycles_ref_command  # noqa: E402
 
 IOR = 1.45
 TINT = (1.0, 0.75, 0.75)
@@ -298,8 +299,8 @@ def main():
                 images["mitsuba"] = (read_exr(prefix + ".exr"), read_exr(prefix + "_var.exr"))
         if "cycles" in refs and blender:
             prefix = os.path.join(d, "cycles")
-            r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--", os.path.join(d, "scene"),
-                                "--mode", "radiance", "--smooth-glass", "--max-depth", str(DEPTH), "--spp", str(args.spp), "--renders", str(args.renders), "--out", prefix], capture_output=True, text=True)
+            r = subprocess.run(cycles_ref_command(blender, os.path.join(d, "scene"), "--mode", "radiance", "--smooth-glass", "--max-depth", str(DEPTH), "--spp", str(args.spp),
+                                                  "--renders", str(args.renders), "--out", prefix), capture_output=True, text=True)
             if r.returncode != 0:
                 images["cycles"] = [l for l in r.stderr.splitlines() if l.strip()][-1]
             else:

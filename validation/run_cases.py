@@ -109,6 +109,11 @@ def normalise_export(src, dst):
     return dst, scale
 
 
+def cycles_ref_command(blender, scene_dir, *args):
+    """Blender's Python running cycles_ref.py on the exported scene in `scene_dir`."""
+    return [blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--", scene_dir, *args]
+
+
 def sh(cmd, **kw):
     r = subprocess.run(cmd, capture_output=True, text=True, **kw)
     if r.returncode != 0:
@@ -203,8 +208,7 @@ class Harness:
         renders = renders or t["ref_renders"]
         ref = os.path.join(self.cache, f"cycles_{key}_{mode}_m{m}_{spp}x{renders}")
         if not os.path.exists(ref + "_cycles.json"):
-            r = subprocess.run([self.blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--",
-                                scene_dir, "--mode", mode, "--max-depth", str(m), "--spp", str(spp), "--renders", str(renders), "--out", ref],
+            r = subprocess.run(cycles_ref_command(self.blender, scene_dir, "--mode", mode, "--max-depth", str(m), "--spp", str(spp), "--renders", str(renders), "--out", ref),
                                capture_output=True, text=True)
             if r.returncode == 3 or "cannot represent exactly" in r.stderr:
                 return {"refused": [l for l in r.stderr.splitlines() if "cycles_ref" in l][-1]}
@@ -231,8 +235,8 @@ class Harness:
             with open(out + "_ladder.json") as f:
                 runs = json.load(f)
         elif rname == "cycles":
-            sh([self.blender, "-b", "--factory-startup", "--python-exit-code", "1", "-P", os.path.join(HERE, "cycles_ref.py"), "--", scene_dir,
-                "--mode", "radiance", "--max-depth", str(m), "--spp", "1", "--renders", "0", "--ladder", lad, "--ladder-seeds", str(t["ladder_seeds"]), "--out", out])
+            sh(cycles_ref_command(self.blender, scene_dir, "--mode", "radiance", "--max-depth", str(m), "--spp", "1", "--renders", "0", "--ladder", lad,
+                                  "--ladder-seeds", str(t["ladder_seeds"]), "--out", out))
             with open(out + "_cycles.json") as f:
                 runs = json.load(f)["ladder"]
         else:
