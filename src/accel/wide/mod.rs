@@ -180,11 +180,11 @@ impl<const W: usize> WideBvh<W> {
         let budget = match options.splits {
             super::Splits::Budget(b) => {
                 let b = b.clamp(0.0, 4.0);
-                return Self::with_policy(Self::tree(&prims, b), options, SplitOutcome::Asked { budget: b });
+                return Self::with_policy(Self::tree(&prims, b), &prims, options, SplitOutcome::Asked { budget: b });
             }
             super::Splits::Auto => AUTO_SPLIT_BUDGET,
         };
-        let plain = Self::with_policy(Self::tree(&prims, 0.0), options, SplitOutcome::NotTried { expected_rays: 0, needed_rays: 0 });
+        let plain = Self::with_policy(Self::tree(&prims, 0.0), &prims, options, SplitOutcome::NotTried { expected_rays: 0, needed_rays: 0 });
         if options.expected_rays == 0 {
             return plain;
         }
@@ -192,13 +192,13 @@ impl<const W: usize> WideBvh<W> {
         if let Some(needed_rays) = split_choice::beyond_reach(sah.nodes + sah.leaves, prims.len(), options.expected_rays) {
             return WideBvh { splits: SplitOutcome::NotTried { expected_rays: options.expected_rays, needed_rays }, ..plain };
         }
-        let sample = plain.sample(sample::SAMPLE_RAYS);
+        let sample = plain.sample(&prims, sample::SAMPLE_RAYS, sample::Within::Uniform);
         let plain_work = plain.work(&sample);
         let needed_rays = split_choice::rays_to_repay(&plain_work, prims.len());
         if options.expected_rays < needed_rays {
             return WideBvh { splits: SplitOutcome::NotTried { expected_rays: options.expected_rays, needed_rays }, ..plain };
         }
-        let split = Self::with_policy(Self::tree(&prims, budget), options, SplitOutcome::Asked { budget });
+        let split = Self::with_policy(Self::tree(&prims, budget), &prims, options, SplitOutcome::Asked { budget });
         let outcome = split_choice::judge(&plain_work, &split.work(&sample));
         if outcome.split() {
             WideBvh { splits: outcome, ..split }
@@ -226,9 +226,9 @@ impl<const W: usize> WideBvh<W> {
 
     /// `tree` with its policy under `options`, chosen from the tree through
     /// the traversals that need no policy of their own (scalar box tests).
-    fn with_policy(tree: Tree<W>, options: &super::NativeOptions, splits: SplitOutcome) -> Self {
+    fn with_policy(tree: Tree<W>, prims: &prims::PrimTable, options: &super::NativeOptions, splits: SplitOutcome) -> Self {
         let mut b = WideBvh { tree, policy: Policy::PROVISIONAL, splits };
-        b.policy = Policy::choose(&b, options);
+        b.policy = Policy::choose(&b, prims, options);
         b
     }
 

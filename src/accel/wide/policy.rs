@@ -113,8 +113,8 @@ impl Policy {
     };
 
     /// The policy for a freshly built `tree` (whose own policy is not read)
-    /// under `options` on this CPU.
-    pub(super) fn choose<const W: usize>(tree: &WideBvh<W>, options: &NativeOptions) -> Policy {
+    /// over the scene's `prims` under `options` on this CPU.
+    pub(super) fn choose<const W: usize>(tree: &WideBvh<W>, prims: &crate::accel::prims::PrimTable, options: &NativeOptions) -> Policy {
         let avx = W == 8 && avx_available_for(options.isa);
         let boxes = if avx { BoxIsa::Avx2 } else { BoxIsa::Sse2 };
         let packets = if W == 8 && avx512_available(options.isa) { PacketIsa::Avx512 } else { PacketIsa::Avx2 };
@@ -141,7 +141,7 @@ impl Policy {
             closest,
             shadows: if stream_shadows { ShadowBatches::Streams } else { ShadowBatches::Packets },
             prefetch: if tree.memory_bytes() >= PACKET_PREFETCH_BYTES { PacketPrefetch::On } else { PacketPrefetch::Off },
-            any_order: tree.any_order_of(),
+            any_order: tree.any_order_of(prims),
         }
     }
 

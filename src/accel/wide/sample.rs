@@ -1,7 +1,10 @@
 //! The tree's own sample of rays, from which the spatial-split decision
-//! (`split_choice`) is counted rather than timed (so the same scene always
-//! gets the same tree): points spread over its triangles by area (as the
-//! points a camera or a path reaches are), leaving the side that
+//! (`split_choice`) and the any-hit child order (`single::any_order_of`)
+//! are counted rather than timed (so the same scene always gets the same
+//! tree): points spread over the scene's triangles by area (as the points
+//! a camera or a path reaches are), stratified in the scene's order of
+//! triangles so that the sample does not depend on how the build lays the
+//! tree out, leaving the side that
 //! faces a point just under the top of the scene's box, where lights
 //! usually are and where the benchmark's shadow rays go. Two kinds:
 //!
@@ -13,7 +16,8 @@
 //! visited plus triangle groups (and spheres) tested.
 
 use super::stack::ChildOrder;
-use super::{WideBvh, EMPTY, LANES};
+use super::prims::{triangle_area, PrimTable};
+use super::{WideBvh, EMPTY};
 use crate::ray::Ray;
 use crate::rng::Rng;
 use glam::Vec3;
@@ -23,8 +27,17 @@ use rayon::prelude::*;
 /// 1 % between 512 and 4096 rays on every bench scene (`split_choice`).
 pub(super) const SAMPLE_RAYS: usize = 4096;
 
-/// Groups per chunk of the cumulative area (`sample`).
-const SAMPLE_CHUNK: usize = 16;
+/// Triangles per run of the cumulative area (`sample`).
+const SAMPLE_CHUNK: usize = 128;
+
+/// Where in a sampled triangle its rays start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Within {
+    /// Uniformly over the triangle (the spatial-split decision).
+    Uniform,
+    /// At its centroid (the any-hit child order: `single::any_order_of`).
+    Centroid,
+}
 
 /// The two kinds of sampled rays, in the same order (ray `k` of each
 /// starts at the same point).
@@ -51,45 +64,25 @@ impl Work {
 }
 
 impl<const W: usize> WideBvh<W> {
-    /// `n` points over the tree's triangles, spread by area (stratified
-    /// over the cumulative area, uniform within a triangle; fixed seed),
+    /// `n` points over the triangles of `prims` (the scene the tree was
+    /// built over), spread by area (stratified over the cumulative area in
+    /// the scene's order; within a triangle as `at` says; fixed seed),
     /// and the two rays from each. Spread by area rather than weighted by
     /// it: weights as unequal as a Cornell box's two-triangle walls against
     /// its bunny's 28k triangles left the estimate to a few wall points
     /// (CBbunny's ratio of the two trees' work moved from 1.00 to 0.74
-    /// between 512 and 4096 rays). A tree with spatial splits holds some
-    /// triangles twice, which raises their share; the split decision
-    /// samples the tree without splits (`split_choice`).
-    pub(super) fn sample(&self, n: usize) -> Sample {
-        let groups = &self.tree.groups;
+    /// between 512 and 4096 rays). Spheres are not sampled.
+    pub(super) fn sample(&self, prims: &PrimTable, n: usize, at: Within) -> Sample {
         let mut s = Sample { shadow: Vec::with_capacity(n), diffuse: Vec::with_capacity(n) };
-        if self.tree.root == EMPTY || groups.is_empty() || n == 0 {
+        if self.tree.root == EMPTY || prims.is_empty() || n == 0 {
             return s;
         }
-        // A lane's area: padding and degenerate or non-finite triangles
-        // have none.
-        let area = |gi: usize, lane: usize| {
-            if self.tree.ids[gi * LANES + lane][0] == EMPTY {
-                return 0.0;
-            }
-            let [a, b, c] = self.corners(gi, lane);
-            let a = 0.5 * (b - a).cross(c - a).length() as f64;
-            if a.is_finite() {
-                a
-            } else {
-                0.0
-            }
-        };
-        // The cumulative area over chunks of groups (summed in parallel,
-        // each chunk in order: the same sums at any thread count); a
-        // sample's lane is then found by walking its chunk, so a
-        // 10M-triangle scene needs no array of 10M sums.
-        let chunk_area: Vec<f64> = (0..groups.len().div_ceil(SAMPLE_CHUNK))
-            .into_par_iter()
-            .map(|c| (c * SAMPLE_CHUNK..((c + 1) * SAMPLE_CHUNK).min(groups.len())).map(|gi| (0..LANES).map(|lane| area(gi, lane)).sum::<f64>()).sum())
-            .collect();
-        let cumulative: Vec<f64> = chunk_area.iter().scan(0.0, |sum, a| {
-            *sum += a;
+        // The cumulative area over runs of triangles; a sample's triangle
+        // is then found by walking its run, so a 10M-triangle scene needs
+        // no array of 10M sums.
+        let runs = prims.area_runs(SAMPLE_CHUNK);
+        let cumulative: Vec<f64> = runs.iter().scan(0.0, |sum, r| {
+            *sum += r.2;
             Some(*sum)
         }).collect();
         let total = *cumulative.last().unwrap_or(&0.0);
@@ -100,30 +93,32 @@ impl<const W: usize> WideBvh<W> {
             let c = cumulative.partition_point(|&x| x <= target).min(cumulative.len() - 1);
             let mut left = target - if c > 0 { cumulative[c - 1] } else { 0.0 };
             let mut last = None;
-            for gi in c * SAMPLE_CHUNK..((c + 1) * SAMPLE_CHUNK).min(groups.len()) {
-                for lane in 0..LANES {
-                    let a = area(gi, lane);
-                    if a > 0.0 {
-                        if left < a {
-                            return (gi, lane);
-                        }
-                        left -= a;
-                        last = Some((gi, lane));
+            let (first, count, _) = runs[c];
+            for i in first..first + count {
+                let a = triangle_area(prims.get(i).v);
+                if a > 0.0 {
+                    if left < a {
+                        return i;
                     }
+                    left -= a;
+                    last = Some(i);
                 }
             }
-            // Rounding left a sliver past the chunk's last triangle.
-            last.expect("a chunk with area has a triangle")
+            // Rounding left a sliver past the run's last triangle.
+            last.expect("a run with area has a triangle")
         };
         let light = self.sample_light();
         let mut rng = Rng::new(0x5A_4D_91E, 0x7EE);
         for k in 0..n {
-            let (gi, lane) = pick(total * (k as f64 + rng.uniform() as f64) / n as f64);
+            let i = pick(total * (k as f64 + rng.uniform() as f64) / n as f64);
             let (u1, u2) = rng.uniform2();
             let (u3, u4) = rng.uniform2();
-            let [a, b, c] = self.corners(gi, lane);
+            let [a, b, c] = prims.get(i).v;
             let normal = (b - a).cross(c - a).normalize_or_zero();
-            let (bu, bv) = crate::sampling::uniform_triangle(u1, u2);
+            let (bu, bv) = match at {
+                Within::Uniform => crate::sampling::uniform_triangle(u1, u2),
+                Within::Centroid => (1.0 / 3.0, 1.0 / 3.0),
+            };
             let p = a + (b - a) * bu + (c - a) * bv;
             if normal == Vec3::ZERO || !p.is_finite() {
                 continue;
@@ -136,12 +131,6 @@ impl<const W: usize> WideBvh<W> {
             }
         }
         s
-    }
-
-    /// The corners of triangle `lane` of group `gi`.
-    pub(super) fn corners(&self, gi: usize, lane: usize) -> [Vec3; 3] {
-        let g = &self.tree.groups[gi];
-        [0, 1, 2].map(|c| Vec3::new(g.v[c][0][lane], g.v[c][1][lane], g.v[c][2][lane]))
     }
 
     /// Where the sampled shadow rays go: just under the middle of the top

@@ -2,20 +2,21 @@
 //! falls back on (`walk`), closest and any hit for one ray and for
 //! batches traced ray by ray, and the child order any-hit rays take,
 //! chosen when the tree is built from a sample of shadow-like rays over
-//! its own triangles (`any_order_of`).
+//! the scene's triangles (`any_order_of`).
 
 use super::kernels::Slab;
 use super::triangle::Shear;
 use super::stack::{ChildOrder, WalkStack};
-use super::{WideBvh, EMPTY, LANES, LEAF_BIT};
+use super::{WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::prims::closer;
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
 
 /// Rays in the sample that chooses the any-hit child order
-/// (`any_order_of`): from 512 to 4096 rays the weighted ratios moved by
-/// 4 % at most (subdiv:bunny:100k 1.16 to 1.12), no choice with them.
+/// (`any_order_of`): from 512 to 4096 rays the ratios moved by 3 % at
+/// most (grass:500k 0.660 to 0.678, subdiv:bunny:100k 1.100 to 1.073), no
+/// choice with them.
 const ORDER_SAMPLE: usize = 512;
 /// Nearest first is chosen only where its sampled work is below 7/8 of
 /// farthest first's. The sample times single rays; coherent batches go in
@@ -120,58 +121,41 @@ impl<const W: usize> WideBvh<W> {
     /// (`ORDER_MARGIN`). Which order finds occluders sooner depends on the
     /// scene (see `ChildOrder`); both give the same answers.
     ///
-    /// The sample is the tree's own: rays leaving triangles spread evenly
-    /// over its groups (from their centroids, on the side facing the
-    /// point) towards a point just under the top of the scene's box, where
-    /// lights usually are and where the benchmark's shadow rays go, each
-    /// ray's work weighted by its triangle's area: the points a camera or a
-    /// path reaches are spread by area, not by triangle. Against the work
-    /// of the benchmark's own shadow rays (256x192 camera hits), nearest ÷
-    /// farthest first, the weighted sample ÷ the shadow rays: cow 1.62 /
-    /// 1.79, maxplanck 0.995 / 0.980, beetle 0.975 / 1.068, CBbunny 1.026 /
-    /// 1.068, stadium:500k 0.637 / 0.851, grass:500k 0.238 / 0.718,
-    /// arch:100k 1.00 / 1.37, sphere:100k 1.00 / 1.00, subdiv:bunny:100k
-    /// 1.16 / 1.20: the same choice on every scene (unweighted, stadium's
-    /// finely cut tiers read 1.31 and chose farthest first). Chosen once,
-    /// when the tree is built, so that the same batch always takes the
-    /// same way; chosen per batch from the batches' own rays (every 16th
-    /// batch, the sums decaying), the choice depended on which thread's
-    /// batch came first.
-    pub(super) fn any_order_of(&self) -> ChildOrder {
-        let groups = &self.tree.groups;
-        if self.tree.root == EMPTY || groups.is_empty() {
-            return ChildOrder::FarthestFirst;
-        }
-        let light = self.sample_light();
-        let (mut far, mut near) = (0.0f64, 0.0f64);
-        for k in 0..ORDER_SAMPLE {
-            let gi = (k * groups.len() / ORDER_SAMPLE).min(groups.len() - 1);
-            let lane = k % LANES;
-            if self.tree.ids[gi * LANES + lane][0] == EMPTY {
-                continue;
-            }
-            let corners = self.corners(gi, lane);
-            let (a, e1, e2) = (corners[0], corners[1] - corners[0], corners[2] - corners[0]);
-            let cross = e1.cross(e2);
-            let (n, area) = (cross.normalize_or_zero(), 0.5 * cross.length() as f64);
-            let p = a + (e1 + e2) / 3.0;
-            if n == glam::Vec3::ZERO || !p.is_finite() || !area.is_finite() {
-                continue;
-            }
-            let (_, ray) = super::sample::shadow_ray(p, n, &corners, light);
-            if ray.is_valid() {
-                let (mut f, mut nf) = (0u32, 0u32);
-                self.any_counted::<false>(&ray, ChildOrder::FarthestFirst, &mut f);
-                self.any_counted::<false>(&ray, ChildOrder::NearestFirst, &mut nf);
-                far += area * f as f64;
-                near += area * nf as f64;
-            }
-        }
+    /// The sample (`sample`, `Within::Centroid`): rays from the centroids
+    /// of triangles picked by area, stratified over the scene's own order
+    /// of triangles (not the tree's, which changes with how the build
+    /// partitions: sampled by place in the tree's arrays, a partition that
+    /// built the same tree in another order flipped grass:500k's choice),
+    /// on the side facing a point just under the top of the scene's box,
+    /// where lights usually are and where the benchmark's shadow rays go.
+    /// Against the work of the benchmark's own shadow rays (256x192 camera
+    /// hits), nearest ÷ farthest first, the sample ÷ the shadow rays: cow
+    /// 1.57 / 1.79, maxplanck 0.996 / 0.977, beetle 0.971 / 1.068, CBbunny
+    /// 1.062 / 1.075, stadium:500k 0.864 / 0.856, grass:500k 0.660 / 0.720,
+    /// arch:100k 1.03 / 1.36, sphere:100k 1.00 / 1.00, subdiv:bunny:100k
+    /// 1.10 / 1.20: the same choice on every scene. From points uniform
+    /// within the triangles instead of centroids, stadium's sample read
+    /// 0.938 (512 and 4096 rays alike) and chose farthest first. Chosen
+    /// once, when the tree is built, so that the same batch always takes
+    /// the same way; chosen per batch from the batches' own rays (every
+    /// 16th batch, the sums decaying), the choice depended on which
+    /// thread's batch came first. The sample's pass over the triangles'
+    /// areas costs about 1 % of a build (10 ms of sphere:5m's 800 on 2
+    /// threads).
+    pub(super) fn any_order_of(&self, prims: &crate::accel::prims::PrimTable) -> ChildOrder {
+        let (far, near) = self.any_order_work(prims);
         if near * ORDER_MARGIN.1 < far * ORDER_MARGIN.0 {
             ChildOrder::NearestFirst
         } else {
             ChildOrder::FarthestFirst
         }
+    }
+
+    /// The mean work of farthest-first and nearest-first any-hit rays over
+    /// the shadow rays of the tree's sample (`any_order_of`).
+    pub(super) fn any_order_work(&self, prims: &crate::accel::prims::PrimTable) -> (f64, f64) {
+        let sample = self.sample(prims, ORDER_SAMPLE, super::sample::Within::Centroid);
+        (self.any_work(&sample.shadow, ChildOrder::FarthestFirst), self.any_work(&sample.shadow, ChildOrder::NearestFirst))
     }
 
     #[inline(always)]

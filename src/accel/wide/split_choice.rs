@@ -27,9 +27,9 @@ use super::sample::Work;
 
 /// Spatial splits are kept only where they cut the sampled work by this
 /// fraction. Sampled work with a budget of 0.3 against none (4096 rays):
-/// beetle −4.6 %, grass:500k −3.5 %, maxplanck −2.6 %, cow −2.4 %,
-/// subdivided bunny −0.2 %, CBbunny +0.3 %, arch:500k −0.3 %,
-/// stadium:500k +2.7 %. Speed did not follow the counts far enough: grass's
+/// beetle −4.5 %, grass:500k −3.7 %, maxplanck −2.7 %, cow −2.4 %,
+/// subdivided bunny −0.4 %, CBbunny 0.0 %, arch:500k −0.5 %,
+/// stadium:500k +5.8 %. Speed did not follow the counts far enough: grass's
 /// random rays ran 10 % slower with splits (its tree grows by the
 /// duplicated blades and misses the caches more), and beetle, the largest
 /// count, rendered 1-3 % slower with them (480x360, 256 spp, `-m 5`, three
