@@ -40,27 +40,55 @@ pub(super) fn partition<F: Fn(&PrimRef) -> bool + Sync>(v: &mut [PrimRef], pred:
     }
 }
 
+thread_local! {
+    /// The right side's references while `partition_serial` runs: one per
+    /// thread, grown to the largest set it partitioned (at most
+    /// `PARALLEL_PARTITION` references, 2 MiB).
+    static RIGHT: std::cell::RefCell<Vec<PrimRef>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A stable partition without branches on the side: every reference is
+/// written both to the left side's place in `v` and to the right side's
+/// buffer, and only the cursor of its own side moves. The two-ended scan
+/// it replaced branched on every reference's side, which the CPU cannot
+/// predict within a set being split; this one built the same trees 4-18 %
+/// faster (docs/notes/2026-11-29-builds-and-thin-streams.md). The sides'
+/// bounds are gathered in a second pass over references still in cache.
 fn partition_serial<F: Fn(&PrimRef) -> bool>(v: &mut [PrimRef], pred: &F) -> (usize, SideBounds) {
-    let (mut lb, mut lc, mut rb, mut rc) = (Box4::EMPTY, Box4::EMPTY, Box4::EMPTY, Box4::EMPTY);
-    let (mut i, mut j) = (0, v.len());
-    loop {
-        while i < j && pred(&v[i]) {
-            lb = lb.union(Box4::of(&v[i]));
-            lc.grow(v[i].centroid2());
-            i += 1;
+    let n = v.len();
+    let left = RIGHT.with(|right| {
+        let mut right = right.borrow_mut();
+        right.clear();
+        right.reserve(n);
+        let (base, out) = (v.as_mut_ptr(), right.as_mut_ptr());
+        let (mut l, mut r) = (0usize, 0usize);
+        for i in 0..n {
+            // SAFETY: `l <= i < n`, so the write to `v` lands on an element
+            // already read (or this one); `r <= i < n` fits the buffer's
+            // reserved room. Both cursors count the references written
+            // before `i` to their side.
+            unsafe {
+                let x = *base.add(i);
+                let goes_left = pred(&x);
+                *base.add(l) = x;
+                *out.add(r) = x;
+                l += goes_left as usize;
+                r += !goes_left as usize;
+            }
         }
-        while i < j && !pred(&v[j - 1]) {
-            rb = rb.union(Box4::of(&v[j - 1]));
-            rc.grow(v[j - 1].centroid2());
-            j -= 1;
-        }
-        if i >= j {
-            return (i, ((lb, lc), (rb, rc)));
-        }
-        // v[i] belongs right and v[j-1] left: swap, and the scans above
-        // take them on the next round.
-        v.swap(i, j - 1);
-    }
+        // SAFETY: the buffer's first `r` elements were written above.
+        unsafe { right.set_len(r) };
+        v[l..].copy_from_slice(&right);
+        l
+    });
+    let side = |refs: &[PrimRef]| {
+        refs.iter().fold((Box4::EMPTY, Box4::EMPTY), |(mut b, mut c), r| {
+            b = b.union(Box4::of(r));
+            c.grow(r.centroid2());
+            (b, c)
+        })
+    };
+    (left, (side(&v[..left]), side(&v[left..])))
 }
 
 fn merge(a: SideBounds, b: SideBounds) -> SideBounds {
@@ -179,6 +207,32 @@ mod tests {
             for (x, y) in [(b.0 .0, bs.0 .0), (b.0 .1, bs.0 .1), (b.1 .0, bs.1 .0), (b.1 .1, bs.1 .1)] {
                 assert!(same(&x, &y), "n {n}, cut {cut}: bounds differ");
             }
+        }
+    }
+
+    /// The serial partition keeps each side in the set's order, with every
+    /// side's bounds, on sets of every size up to the parallel threshold
+    /// (the per-thread buffer is reused from a larger set to a smaller).
+    #[test]
+    fn serial_partition_is_stable_with_each_sides_bounds() {
+        for (n, cut) in [(PARALLEL_PARTITION, 50.0), (1000, 10.0), (1, 50.0), (0, 50.0), (777, -1.0), (777, 1000.0)] {
+            let pred = |r: &PrimRef| r.centroid2().z < 2.0 * cut;
+            let mut v = refs(n, 11 + n as u64);
+            let want: Vec<u32> = v.iter().filter(|r| pred(r)).chain(v.iter().filter(|r| !pred(r))).map(|r| r.index()).collect();
+            let m_want = v.iter().filter(|r| pred(r)).count();
+            let (m, ((lb, lc), (rb, rc))) = partition_serial(&mut v, &pred);
+            assert_eq!(m, m_want, "n {n}, cut {cut}");
+            assert_eq!(v.iter().map(|r| r.index()).collect::<Vec<_>>(), want, "n {n}, cut {cut}: order");
+            let bounds = |refs: &[PrimRef]| {
+                let (mut b, mut c) = (Box4::EMPTY, Box4::EMPTY);
+                for r in refs {
+                    b = b.union(Box4::of(r));
+                    c.grow(r.centroid2());
+                }
+                (b, c)
+            };
+            let ((wlb, wlc), (wrb, wrc)) = (bounds(&v[..m]), bounds(&v[m..]));
+            assert!(same(&lb, &wlb) && same(&lc, &wlc) && same(&rb, &wrb) && same(&rc, &wrc), "n {n}, cut {cut}: bounds");
         }
     }
 
