@@ -55,7 +55,7 @@ mod triangle;
 
 #[cfg(test)]
 use policy::avx_available;
-use policy::{ClosestBatches, Otherwise, PacketPrefetch, Policy};
+use policy::{ClosestBatches, PacketPrefetch, Policy};
 pub use policy::simd_level;
 use stack::ChildOrder;
 pub use split_choice::SplitOutcome;
@@ -382,9 +382,9 @@ impl<const W: usize> Traversal for WideBvh<W> {
             return unsafe {
                 match self.policy.closest {
                     ClosestBatches::Streams => self.closest_streams(rays, hits),
-                    ClosestBatches::StreamsWhereCoherent { .. } if self.streams_pay(rays) => self.closest_streams(rays, hits),
-                    ClosestBatches::Interleaved | ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Interleaved } => self.closest_interleaved_avx(rays, hits),
-                    ClosestBatches::Single | ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Single } => self.closest_all_avx(rays, hits),
+                    ClosestBatches::StreamsWhereCoherent if self.streams_pay(rays) => self.closest_streams(rays, hits),
+                    ClosestBatches::Interleaved => self.closest_interleaved_avx(rays, hits),
+                    ClosestBatches::Single | ClosestBatches::StreamsWhereCoherent => self.closest_all_avx(rays, hits),
                 }
             };
         }

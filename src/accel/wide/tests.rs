@@ -78,7 +78,7 @@ fn every_width_and_instruction_set_matches_brute_force() {
     // force them here.
     let mut interleaved = WideBvh::<8>::build(&shapes);
     if interleaved.policy.avx() {
-        interleaved.policy.closest = ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Interleaved };
+        interleaved.policy.closest = ClosestBatches::Interleaved;
     }
     let mut candidates: Vec<(&str, Box<dyn Traversal>)> = vec![
         ("4-wide", Box::new(WideBvh::<4>::build(&shapes))),
@@ -150,7 +150,7 @@ fn spatial_split_trees_match_brute_force() {
     candidates.push(("SSE2", sse));
     let mut interleaved = WideBvh::<8>::build_with_splits(&shapes, 0.5);
     if interleaved.policy.avx() {
-        interleaved.policy.closest = ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Interleaved };
+        interleaved.policy.closest = ClosestBatches::Interleaved;
     }
     if interleaved.policy.avx() {
         interleaved.policy.shadows = policy::ShadowBatches::Streams;
@@ -513,7 +513,7 @@ fn a_hit_at_exactly_tmax_is_found_in_every_mode() {
         vec![("4-wide", Box::new(WideBvh::<4>::build(&shapes))), ("8-wide", Box::new(WideBvh::<8>::build(&shapes)))];
     let mut interleaved = WideBvh::<8>::build(&shapes);
     if interleaved.policy.avx() {
-        interleaved.policy.closest = ClosestBatches::StreamsWhereCoherent { otherwise: Otherwise::Interleaved };
+        interleaved.policy.closest = ClosestBatches::Interleaved;
     }
     candidates.push(("8-wide interleaved", Box::new(interleaved)));
     if avx512_on() {
