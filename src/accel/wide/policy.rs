@@ -156,10 +156,16 @@ impl Policy {
         self.boxes == BoxIsa::Avx2 && self.packets == PacketIsa::Avx512
     }
 
-    /// The policy's words for a tree's summary line: "AVX2, shadow packets,
-    /// any hit farthest first".
+    /// The policy's words for a tree's summary line: "AVX2, closest hits
+    /// interleaved, shadow packets, any hit farthest first".
     pub(super) fn describe(&self) -> String {
         let isa = isa_words(self.avx(), self.avx512());
+        let closest = match self.closest {
+            ClosestBatches::Single => "closest hits one by one",
+            ClosestBatches::Interleaved => "closest hits interleaved",
+            ClosestBatches::Streams => "closest-hit streams",
+            ClosestBatches::StreamsWhereCoherent => "closest-hit streams where coherent",
+        };
         let shadows = match self.shadows {
             ShadowBatches::Packets => "shadow packets",
             ShadowBatches::Streams => "shadow streams",
@@ -168,7 +174,7 @@ impl Policy {
             ChildOrder::FarthestFirst => "any hit farthest first",
             ChildOrder::NearestFirst => "any hit nearest first",
         };
-        format!("{isa}, {shadows}, {order}")
+        format!("{isa}, {closest}, {shadows}, {order}")
     }
 }
 
