@@ -19,7 +19,11 @@ use crate::ray::Ray;
 /// Random rays, 4 in flight against 1 (`pathtracer bench`, 2-core EPYC with
 /// 32 MiB of L3): 1M triangles (68 MB) +23 %, 400k (26 MB) +17 %, 200k
 /// (13 MB) -4 %, CBbunny (1.7 MB) -32 %: below this size the walkers' extra
-/// state costs more than the overlapped misses save.
+/// state costs more than the overlapped misses save. With 12 in flight and
+/// the prefetch, still (1 thread, random / diffuse batches, Mrays/s, auto
+/// against interleaved): cow 9.7 / 13.0 against 8.5 / 6.5, CBbunny 11.3-11.9
+/// / 10.5-10.7 against 8.5-8.7 / 6.3, maxplanck 5.8-6.6 / 7.4-7.5 against
+/// 6.2-6.4 / 3.3-4.3.
 pub(super) const INTERLEAVE_BYTES: usize = 16 << 20;
 
 /// Size is not enough: what interleaving overlaps is cache misses, and a
