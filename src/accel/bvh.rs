@@ -289,19 +289,21 @@ pub(super) const ROBUST_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1
 
 /// Bounds of the primitives and of their (doubled) centroids.
 fn ref_bounds(refs: &[PrimRef]) -> (Box4, Box4) {
-    let one = |refs: &[PrimRef]| {
-        let (mut b, mut c) = (Box4::EMPTY, Box4::EMPTY);
-        for r in refs {
-            b = b.union(Box4::of(r));
-            c.grow(r.centroid2());
-        }
-        (b, c)
-    };
     if refs.len() > PARALLEL_BINNING {
-        refs.par_chunks(BIN_CHUNK).map(one).reduce(|| (Box4::EMPTY, Box4::EMPTY), |a, b| (a.0.union(b.0), a.1.union(b.1)))
+        refs.par_chunks(BIN_CHUNK).map(ref_bounds_serial).reduce(|| (Box4::EMPTY, Box4::EMPTY), |a, b| (a.0.union(b.0), a.1.union(b.1)))
     } else {
-        one(refs)
+        ref_bounds_serial(refs)
     }
+}
+
+/// `ref_bounds` in one pass on this thread.
+fn ref_bounds_serial(refs: &[PrimRef]) -> (Box4, Box4) {
+    let (mut b, mut c) = (Box4::EMPTY, Box4::EMPTY);
+    for r in refs {
+        b = b.union(Box4::of(r));
+        c.grow(r.centroid2());
+    }
+    (b, c)
 }
 
 #[cfg(test)]

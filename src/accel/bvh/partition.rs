@@ -13,7 +13,7 @@
 //! 20-25 ms). The chunks are cut at fixed offsets, so the result never
 //! depends on the thread count.
 
-use super::{Box4, PrimRef};
+use super::{ref_bounds_serial, Box4, PrimRef};
 use rayon::prelude::*;
 
 /// Sets larger than this are partitioned in parallel.
@@ -81,14 +81,7 @@ fn partition_serial<F: Fn(&PrimRef) -> bool>(v: &mut [PrimRef], pred: &F) -> (us
         v[l..].copy_from_slice(&right);
         l
     });
-    let side = |refs: &[PrimRef]| {
-        refs.iter().fold((Box4::EMPTY, Box4::EMPTY), |(mut b, mut c), r| {
-            b = b.union(Box4::of(r));
-            c.grow(r.centroid2());
-            (b, c)
-        })
-    };
-    (left, (side(&v[..left]), side(&v[left..])))
+    (left, (ref_bounds_serial(&v[..left]), ref_bounds_serial(&v[left..])))
 }
 
 fn merge(a: SideBounds, b: SideBounds) -> SideBounds {
@@ -223,15 +216,7 @@ mod tests {
             let (m, ((lb, lc), (rb, rc))) = partition_serial(&mut v, &pred);
             assert_eq!(m, m_want, "n {n}, cut {cut}");
             assert_eq!(v.iter().map(|r| r.index()).collect::<Vec<_>>(), want, "n {n}, cut {cut}: order");
-            let bounds = |refs: &[PrimRef]| {
-                let (mut b, mut c) = (Box4::EMPTY, Box4::EMPTY);
-                for r in refs {
-                    b = b.union(Box4::of(r));
-                    c.grow(r.centroid2());
-                }
-                (b, c)
-            };
-            let ((wlb, wlc), (wrb, wrc)) = (bounds(&v[..m]), bounds(&v[m..]));
+            let ((wlb, wlc), (wrb, wrc)) = (ref_bounds_serial(&v[..m]), ref_bounds_serial(&v[m..]));
             assert!(same(&lb, &wlb) && same(&lc, &wlc) && same(&rb, &wrb) && same(&rc, &wrc), "n {n}, cut {cut}: bounds");
         }
     }
