@@ -321,17 +321,22 @@ fn subdiv_scene(spec: &str, rest: &str, find: FindScene) -> Result<Scene> {
 /// holes in a scan are kept, not closed.
 pub fn loop_subdivide(m: &TriangleMesh) -> TriangleMesh {
     let nv = m.positions.len();
-    // Each undirected edge: its new vertex and the (up to two) opposite vertices.
-    let mut edges: HashMap<(u32, u32), (u32, [u32; 2], u8)> = HashMap::with_capacity(m.triangles.len() * 3 / 2 + 16);
-    let mut next = nv as u32;
+    // Each undirected edge, numbered in the order the triangles first use
+    // it: its endpoints, the (up to two) opposite vertices and its uses;
+    // its new vertex is `nv` + its number. The map only finds an edge's
+    // number: iterating it would visit the edges in an order that differs
+    // between runs, and the neighbour sums below would round differently.
+    let mut number: HashMap<(u32, u32), u32> = HashMap::with_capacity(m.triangles.len() * 3 / 2 + 16);
+    let mut edges: Vec<((u32, u32), [u32; 2], u8)> = Vec::with_capacity(m.triangles.len() * 3 / 2 + 16);
     for t in &m.triangles {
         for k in 0..3 {
             let (a, b, c) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
             let key = (a.min(b), a.max(b));
-            let e = edges.entry(key).or_insert_with(|| {
-                next += 1;
-                (next - 1, [u32::MAX; 2], 0)
+            let j = *number.entry(key).or_insert_with(|| {
+                edges.push((key, [u32::MAX; 2], 0));
+                (edges.len() - 1) as u32
             });
+            let e = &mut edges[j as usize];
             if (e.2 as usize) < 2 {
                 e.1[e.2 as usize] = c;
             }
@@ -339,18 +344,11 @@ pub fn loop_subdivide(m: &TriangleMesh) -> TriangleMesh {
         }
     }
     let p = &m.positions;
-    let mut out = vec![Vec3::ZERO; next as usize];
+    let mut out = vec![Vec3::ZERO; nv + edges.len()];
     let mut neighbours = vec![Vec3::ZERO; nv];
     let mut valence = vec![0u32; nv];
     let mut boundary = vec![false; nv];
-    // Edges in the order their new vertices were numbered, not the map's
-    // (which differs between runs): each old vertex's neighbours are summed
-    // in that order, so the same mesh gives the same bits in every run.
-    let mut in_order = vec![((0u32, 0u32), [u32::MAX; 2], 0u8); edges.len()];
-    for (&key, &(i, opp, uses)) in &edges {
-        in_order[i as usize - nv] = (key, opp, uses);
-    }
-    for (e, &((a, b), opp, uses)) in in_order.iter().enumerate() {
+    for (e, &((a, b), opp, uses)) in edges.iter().enumerate() {
         let i = (nv + e) as u32;
         let (pa, pb) = (p[a as usize], p[b as usize]);
         out[i as usize] = if uses == 2 { 0.375 * (pa + pb) + 0.125 * (p[opp[0] as usize] + p[opp[1] as usize]) } else { 0.5 * (pa + pb) };
@@ -373,7 +371,7 @@ pub fn loop_subdivide(m: &TriangleMesh) -> TriangleMesh {
         };
     }
     let mut triangles = Vec::with_capacity(m.triangles.len() * 4);
-    let mid = |a: u32, b: u32| edges[&(a.min(b), a.max(b))].0;
+    let mid = |a: u32, b: u32| nv as u32 + number[&(a.min(b), a.max(b))];
     for &[a, b, c] in &m.triangles {
         let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
         triangles.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
