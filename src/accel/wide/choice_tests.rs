@@ -162,3 +162,30 @@ fn spatial_splits_are_kept_only_where_the_sampled_work_falls_enough() {
         assert_eq!(shape_of(&b), shape_of(&WideBvh::<8>::build_with_splits(&s.shapes, 0.0)), "{name}: the plain tree");
     }
 }
+
+/// Camera batches (`intersect_coherent`) go the way the tree's incoherent
+/// closest-hit batches go: interleaved on a dense mesh too large for the
+/// caches, packets on the sparse architecture scene; either way they find
+/// exactly the single-ray hits.
+#[test]
+fn camera_batches_interleave_where_the_tree_does() {
+    if !super::tests::avx_or_skip("the camera batch choice") {
+        return;
+    }
+    for (spec, interleaved) in [("sphere:300k", true), ("arch:100k", false)] {
+        let scene = crate::scene::generated::for_tests(spec);
+        let b = WideBvh::<8>::build(&scene.shapes);
+        assert_eq!(b.policy.closest == ClosestBatches::Interleaved, interleaved, "{spec}: incoherent batches");
+        let camera = if interleaved { policy::CameraBatches::Interleaved } else { policy::CameraBatches::Packets };
+        assert_eq!(b.policy.camera, camera, "{spec}: camera batches");
+        let rays = camera_rays(&Camera::from_scene(&scene), 160, 120);
+        let want: Vec<Option<Hit>> = rays.iter().map(|r| b.intersect(r)).collect();
+        assert!(want.iter().filter(|h| h.is_some()).count() > 1000, "{spec}: a test needs hits");
+        let mut got = vec![None; rays.len()];
+        for (r, h) in rays.chunks(4096).zip(got.chunks_mut(4096)) {
+            b.intersect_coherent(r, h);
+        }
+        let bad = got.iter().zip(&want).filter(|(g, w)| g != w).count();
+        assert_eq!(bad, 0, "{spec}: camera batch hits differ from single rays");
+    }
+}
