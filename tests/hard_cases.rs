@@ -52,6 +52,22 @@ fn icosphere(c: Vec3, r: f32, subdivisions: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     (pos, tris)
 }
 
+/// Whether `kind`'s hit distance `t` is the exact `want`. Native and brute
+/// force compute `t` with the watertight test's own division: exactly.
+/// Embree computes it with an approximate reciprocal refined by one Newton
+/// step, and the approximation (`rcpps`) is the CPU's own: Embree 3.13.5
+/// returns 3.9999998 for an exact 4 on a Zen 3 AMD EPYC at every ISA it
+/// offers there (SSE4.2, AVX, AVX2), where the same library had given the
+/// exact 4 on the Zen 4 EPYC and the Intel Xeons this test ran on before
+/// (`rcpps` differs between CPU designs). Embree's `t` is held to 2^-22 of
+/// `want` (two units in the last place below it, one above).
+fn t_is(kind: BackendKind, t: f32, want: f32) -> bool {
+    match kind {
+        BackendKind::Native | BackendKind::Brute => t == want,
+        _ => (t - want).abs() <= want.abs() * 2.0f32.powi(-22),
+    }
+}
+
 fn each_backend(shapes: &[Shape], mut f: impl FnMut(BackendKind, &dyn Traversal)) {
     for kind in common::backends() {
         let accel = common::build(kind, shapes);
@@ -136,7 +152,7 @@ fn axis_aligned_rays_with_signed_zeros_hit_edges_and_corners() {
                                 org[(axis + 2) % 3] += b;
                                 let r = Ray::new(org, d);
                                 let h = accel.intersect(&r);
-                                assert!(h.is_some_and(|h| h.t == 4.0), "{kind}: axis ray {r:?} gave {h:?}");
+                                assert!(h.is_some_and(|h| t_is(kind, h.t, 4.0)), "{kind}: axis ray {r:?} gave {h:?}");
                                 assert!(accel.occluded(&r), "{kind}: axis ray {r:?} not occluded");
                             }
                         }
@@ -155,7 +171,7 @@ fn grazing_rays() {
     each_backend(&shapes, |kind, accel| {
         let r = Ray::new(Vec3::new(-5.0, 0.3, 1.0), Vec3::X);
         let h = accel.intersect(&r).unwrap_or_else(|| panic!("{kind}: in-plane ray missed the side face"));
-        assert_eq!(h.t, 4.0, "{kind}");
+        assert!(t_is(kind, h.t, 4.0), "{kind}: t = {}", h.t);
     });
     // Nearly grazing rays onto a large flat triangle: t stays accurate.
     let big = 1.0e4f32;
@@ -205,11 +221,15 @@ fn ray_starting_on_a_surface_and_the_t_range() {
             assert!(accel.intersect(&Ray::new(on, d)).is_none(), "{kind}: ray leaving the surface re-hit it");
             assert!(!accel.occluded(&Ray::new(on, d)), "{kind}");
         }
+        // The range's ends at the backend's own t (exactly 2 for native
+        // and brute force, see `t_is`).
         let r = Ray::new(Vec3::new(0.0, 0.0, 2.0), -Vec3::Z);
-        assert_eq!(accel.intersect(&Ray { tmax: 2.0, ..r }).map(|h| h.t), Some(2.0), "{kind}: t == tmax must hit");
+        let t = accel.intersect(&r).unwrap_or_else(|| panic!("{kind}: missed the triangle")).t;
+        assert!(t_is(kind, t, 2.0), "{kind}: t = {t}");
+        assert_eq!(accel.intersect(&Ray { tmax: t, ..r }).map(|h| h.t), Some(t), "{kind}: t == tmax must hit");
         assert!(accel.intersect(&Ray { tmax: 1.999, ..r }).is_none(), "{kind}");
-        assert!(accel.intersect(&Ray { tmin: 2.0, ..r }).is_none(), "{kind}: t == tmin must not hit");
-        assert!(accel.occluded(&Ray { tmax: 2.0, ..r }) && !accel.occluded(&Ray { tmax: 1.999, ..r }), "{kind}");
+        assert!(accel.intersect(&Ray { tmin: t, ..r }).is_none(), "{kind}: t == tmin must not hit");
+        assert!(accel.occluded(&Ray { tmax: t, ..r }) && !accel.occluded(&Ray { tmax: 1.999, ..r }), "{kind}");
         // Barycentrics: u weights the second vertex, v the third.
         let h = accel.intersect(&Ray::new(Vec3::new(0.0, 1.0, 1.0), -Vec3::Z)).unwrap();
         assert!(h.u.abs() < 1e-6 && (h.v - 1.0).abs() < 1e-6, "{kind}: {h:?}");
