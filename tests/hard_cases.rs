@@ -60,7 +60,8 @@ fn icosphere(c: Vec3, r: f32, subdivisions: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
 /// offers there (SSE4.2, AVX, AVX2), where the same library had given the
 /// exact 4 on the Zen 4 EPYC and the Intel Xeons this test ran on before
 /// (`rcpps` differs between CPU designs). Embree's `t` is held to 2^-22 of
-/// `want` (two units in the last place below it, one above).
+/// `want` (for a power of two, four units in the last place below it, two
+/// above).
 fn t_is(kind: BackendKind, t: f32, want: f32) -> bool {
     match kind {
         BackendKind::Native | BackendKind::Brute => t == want,

@@ -176,8 +176,7 @@ fn camera_batches_interleave_where_the_tree_does() {
         let scene = crate::scene::generated::for_tests(spec);
         let b = WideBvh::<8>::build(&scene.shapes);
         assert_eq!(b.policy.closest == ClosestBatches::Interleaved, interleaved, "{spec}: incoherent batches");
-        let camera = if interleaved { policy::CameraBatches::Interleaved } else { policy::CameraBatches::Packets };
-        assert_eq!(b.policy.camera, camera, "{spec}: camera batches");
+        assert_eq!(b.policy.camera_interleaved(), interleaved, "{spec}: camera batches");
         let rays = camera_rays(&Camera::from_scene(&scene), 160, 120);
         let want: Vec<Option<Hit>> = rays.iter().map(|r| b.intersect(r)).collect();
         assert!(want.iter().filter(|h| h.is_some()).count() > 1000, "{spec}: a test needs hits");

@@ -55,7 +55,7 @@ mod triangle;
 
 #[cfg(test)]
 use policy::avx_available;
-use policy::{CameraBatches, ClosestBatches, PacketPrefetch, Policy};
+use policy::{ClosestBatches, PacketPrefetch, Policy};
 pub use policy::simd_level;
 use stack::ChildOrder;
 pub use split_choice::SplitOutcome;
@@ -404,7 +404,7 @@ impl<const W: usize> Traversal for WideBvh<W> {
     fn intersect_coherent(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), hits.len());
         #[cfg(target_arch = "x86_64")]
-        if self.policy.camera == CameraBatches::Interleaved && self.policy.avx() {
+        if self.policy.camera_interleaved() && self.policy.avx() {
             // SAFETY: the policy has AVX2 box tests only where the CPU has AVX2.
             return unsafe { self.closest_interleaved_avx(rays, hits) };
         }

@@ -46,20 +46,6 @@ pub(super) enum ClosestBatches {
     StreamsWhereCoherent,
 }
 
-/// How coherent closest-hit batches (`intersect_coherent`: camera rays,
-/// 16 neighbouring pixels after each other) go.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum CameraBatches {
-    /// 16-ray packets (`frustum`).
-    Packets,
-    /// As the incoherent batches, interleaved (`interleave`): on a tree
-    /// too large for the caches whose triangles are small beside a
-    /// packet's footprint, a packet's leaves are entered by one or two of
-    /// its rays each and its single chain of node fetches waits on memory,
-    /// where twelve walkers overlap their fetches.
-    Interleaved,
-}
-
 /// How coherent occlusion batches (`occluded_coherent`) go.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum ShadowBatches {
@@ -85,7 +71,6 @@ pub(super) struct Policy {
     pub(super) boxes: BoxIsa,
     pub(super) packets: PacketIsa,
     pub(super) closest: ClosestBatches,
-    pub(super) camera: CameraBatches,
     pub(super) shadows: ShadowBatches,
     pub(super) prefetch: PacketPrefetch,
     /// The child order of any-hit traversals (`ChildOrder`), chosen from a
@@ -115,7 +100,6 @@ impl Policy {
         boxes: BoxIsa::Sse2,
         packets: PacketIsa::Avx2,
         closest: ClosestBatches::Single,
-        camera: CameraBatches::Packets,
         shadows: ShadowBatches::Packets,
         prefetch: PacketPrefetch::Off,
         any_order: ChildOrder::FarthestFirst,
@@ -143,15 +127,6 @@ impl Policy {
             BatchWay::Interleaved if avx => ClosestBatches::Interleaved,
             _ => ClosestBatches::Single,
         };
-        // Camera rays interleave where the other closest hits do. Camera
-        // Mrays/s, native ÷ Embree 4 in one run (2-vCPU AMD EPYC, Zen 3,
-        // AVX2; two runs each, 1 thread, and 2 threads where given),
-        // packets / interleaved: grass 2M 0.76-0.81 / 1.40-1.41, grass 500k
-        // 0.97-1.05 / 1.13-1.26, sphere 5M 0.94-0.96 / 1.32-1.33, sphere 2M
-        // 0.98-1.05 / 1.15-1.45, sphere 1M 1.14-1.36 / 1.13-1.30,
-        // subdivided bunny 1.5M 1.19-1.36 / 1.16-1.37, subdivided CBbunny
-        // 1M 1.30-1.47 / 1.15-1.21: the lowest cell rises from 0.76 to 1.13.
-        let camera = if closest == ClosestBatches::Interleaved { CameraBatches::Interleaved } else { CameraBatches::Packets };
         let stream_shadows = avx
             && match options.shadow {
                 ShadowWay::Auto => interleave && tree.memory_bytes() >= super::STREAM_MIN_BYTES,
@@ -162,7 +137,6 @@ impl Policy {
             boxes,
             packets,
             closest,
-            camera,
             shadows: if stream_shadows { ShadowBatches::Streams } else { ShadowBatches::Packets },
             prefetch: if tree.memory_bytes() >= PACKET_PREFETCH_BYTES { PacketPrefetch::On } else { PacketPrefetch::Off },
             any_order: tree.any_order_of(prims),
@@ -174,6 +148,25 @@ impl Policy {
     #[inline(always)]
     pub(super) fn avx(&self) -> bool {
         self.boxes == BoxIsa::Avx2
+    }
+
+    /// Whether camera batches (`intersect_coherent`: 16 neighbouring
+    /// pixels after each other) go interleaved rather than in 16-ray
+    /// packets (`frustum`): where the incoherent batches do. On a tree too
+    /// large for the caches whose triangles are small beside a packet's
+    /// footprint, a packet's leaves are entered by one or two of its rays
+    /// each and its single chain of node fetches waits on memory, where
+    /// twelve walkers overlap their fetches. Camera Mrays/s, native ÷
+    /// Embree 4 in one run (2-vCPU AMD EPYC, Zen 3, AVX2; two runs each, 1
+    /// thread, and 2 threads where given), packets / interleaved: grass 2M
+    /// 0.76-0.81 / 1.40-1.41, grass 500k 0.97-1.05 / 1.13-1.26, sphere 5M
+    /// 0.94-0.96 / 1.32-1.33, sphere 2M 0.98-1.05 / 1.15-1.45, sphere 1M
+    /// 1.14-1.36 / 1.13-1.30, subdivided bunny 1.5M 1.19-1.36 / 1.16-1.37,
+    /// subdivided CBbunny 1M 1.30-1.47 / 1.15-1.21: the lowest cell rises
+    /// from 0.76 to 1.13.
+    #[inline(always)]
+    pub(super) fn camera_interleaved(&self) -> bool {
+        self.closest == ClosestBatches::Interleaved
     }
 
     /// Whether the AVX-512 packet kernels run (the CPU has AVX-512F).
@@ -188,8 +181,7 @@ impl Policy {
         let isa = isa_words(self.avx(), self.avx512());
         let closest = match self.closest {
             ClosestBatches::Single => "closest hits one by one",
-            ClosestBatches::Interleaved if self.camera == CameraBatches::Interleaved => "closest hits interleaved (camera rays too)",
-            ClosestBatches::Interleaved => "closest hits interleaved",
+            ClosestBatches::Interleaved => "closest hits interleaved (camera rays too)",
             ClosestBatches::Streams => "closest-hit streams",
             ClosestBatches::StreamsWhereCoherent => "closest-hit streams where coherent",
         };

@@ -79,7 +79,6 @@ fn every_width_and_instruction_set_matches_brute_force() {
     let mut interleaved = WideBvh::<8>::build(&shapes);
     if interleaved.policy.avx() {
         interleaved.policy.closest = ClosestBatches::Interleaved;
-        interleaved.policy.camera = policy::CameraBatches::Interleaved;
     }
     let mut candidates: Vec<(&str, Box<dyn Traversal>)> = vec![
         ("4-wide", Box::new(WideBvh::<4>::build(&shapes))),
@@ -152,7 +151,6 @@ fn spatial_split_trees_match_brute_force() {
     let mut interleaved = WideBvh::<8>::build_with_splits(&shapes, 0.5);
     if interleaved.policy.avx() {
         interleaved.policy.closest = ClosestBatches::Interleaved;
-        interleaved.policy.camera = policy::CameraBatches::Interleaved;
     }
     if interleaved.policy.avx() {
         interleaved.policy.shadows = policy::ShadowBatches::Streams;
@@ -516,7 +514,6 @@ fn a_hit_at_exactly_tmax_is_found_in_every_mode() {
     let mut interleaved = WideBvh::<8>::build(&shapes);
     if interleaved.policy.avx() {
         interleaved.policy.closest = ClosestBatches::Interleaved;
-        interleaved.policy.camera = policy::CameraBatches::Interleaved;
     }
     candidates.push(("8-wide interleaved", Box::new(interleaved)));
     if avx512_on() {
