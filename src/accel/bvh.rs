@@ -17,7 +17,8 @@ mod spatial;
 use binning::{area_scale, find_split, Binning};
 use partition::partition;
 
-/// At most this many primitives per leaf; below it the SAH decides.
+/// At most this many primitives per leaf; below it the SAH decides
+/// (`SplitRole`).
 pub(super) const MAX_LEAF: usize = 8;
 /// Sets of at most this many primitives (one `BLOCK`) are leaves without an
 /// SAH test, as in Embree's BVH8 triangle builder (minimum leaf size 4):
@@ -27,12 +28,55 @@ pub(super) const MAX_LEAF: usize = 8;
 /// those sets was ~7 % of the build (1 thread: sphere 229 -> 213 ms,
 /// subdivided bunny 517 -> 488).
 const LEAF_ALWAYS: usize = BLOCK;
-/// Cost of a binary split relative to one block test, for the SAH. About
-/// three binary splits make one 8-wide node visit, so a full node visit's
-/// cost of 1 would overcharge them: with 1.0 the 1M-triangle tree's leaves
-/// cost 3.78 expected block tests (Embree's 2.89), with 0.5 its SAH cost,
-/// 15.81, matches Embree's 15.80.
+/// Cost of a binary split relative to one block test, added to every
+/// candidate split's SAH (it orders splits the same either way) and the
+/// leaf test of a set filled into a node that spans it (`SplitRole::Lane`).
 const TRAVERSAL_COST: f32 = 0.5;
+/// Cost of a wide node's visit relative to one block test, for the leaf
+/// test of a set that would become a node (`SplitRole::Node`), Embree's
+/// `travCost`.
+const NODE_COST: f32 = 1.0;
+/// A set filled into a node whose box has at least this share of the
+/// node's half-area may stay a leaf (`SplitRole::Lane`).
+const SPANNING: f32 = 0.5;
+
+/// What a set is split for, which decides when it is a leaf instead.
+///
+/// A wide node is filled by splitting its largest child again until it has
+/// `W` (`wide::layout::gather`). Those splits cost no node visit, the halves
+/// being lanes of the same node, so a child above a block is split whatever
+/// the binary SAH says; the SAH decides leaves where a set would become a
+/// node of its own, against a whole node visit (`NODE_COST`), as Embree's
+/// builder does. Deciding leaves at every binary split at `TRAVERSAL_COST`
+/// instead built a node per 13 triangles of the 1M sphere where this builds
+/// one per 16, 5-9 % more memory, and SAH costs at or a little above
+/// Embree's where these are at or a little below (maxplanck 12.55 → 12.47,
+/// subdivided bunny 9.93 → 9.88, grass 98.8 → 97.8; Embree 4: 12.48, 9.95,
+/// 98.3). Traversal, native ÷ Embree 4 in one run, two runs each: the
+/// subdivided bunny's random batches 0.93-1.00 → 1.04-1.13 and its diffuse
+/// single rays 0.85-0.91 → 0.94-1.11, grass's single rays 0.84-0.96 →
+/// 0.93-1.03; the 5M sphere's random single rays 0.86-0.87 → 0.77-0.82;
+/// the rest within this machine's noise (`docs/notes`).
+///
+/// One exception keeps a set spanning its node a leaf where the binary SAH
+/// prefers it: primitives as large as the node (arch's ground and floor
+/// slabs, two triangles each crossing everything) then stay in a leaf near
+/// the root, which shadow rays test at once and which occludes nearly all
+/// of them. Split down like the rest, arch's SAH cost falls by a fifth
+/// (4.77 → 3.84, Embree's 4.03) and its closest hits gain 10-30 %, but its
+/// shadow batches ran 3-7 times slower (2.7 → 0.9 and 2.5 → 0.35 times
+/// Embree 4's, 2M and 10M triangles): the SAH counts closest-hit work and
+/// nothing of where any-hit rays stop.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum SplitRole {
+    /// The set becomes a node unless the SAH prefers a leaf: its leaf cost
+    /// against a node visit and its best split's.
+    Node,
+    /// The set is a child of the node being filled, whose half-area is
+    /// `node_area`: split when it holds more than a block, unless it spans
+    /// at least `SPANNING` of the node and the binary SAH prefers a leaf.
+    Lane { node_area: f32 },
+}
 /// Leaves are tested `BLOCK` triangles at a time (`wide::LANES`), so the SAH
 /// counts a side's primitives in whole blocks, as Embree's builder does: a
 /// leaf of 3 triangles costs as much to test as one of 4. Counting single
@@ -222,10 +266,10 @@ impl<'a> BuildSet<'a> {
 
     /// The two children by binned SAH (object or, where it pays and the
     /// budget allows, spatial), or `Err(self)` when this set is a leaf: at
-    /// most `LEAF_ALWAYS` primitives, or at most `MAX_LEAF` that the SAH
-    /// prefers to test together. `prims` gives spatial splits the
+    /// most `LEAF_ALWAYS` primitives, no split found, or at most `MAX_LEAF`
+    /// that `role`'s test keeps together. `prims` gives spatial splits the
     /// triangles to clip.
-    pub(super) fn split(self, prims: &PrimTable) -> Result<(BuildSet<'a>, BuildSet<'a>), BuildSet<'a>> {
+    pub(super) fn split(self, prims: &PrimTable, role: SplitRole) -> Result<(BuildSet<'a>, BuildSet<'a>), BuildSet<'a>> {
         let n = self.n;
         if n <= LEAF_ALWAYS {
             return Err(self);
@@ -242,7 +286,11 @@ impl<'a> BuildSet<'a> {
             _ => None,
         };
         let cost = spatial.map(|s| s.cost).or(object.as_ref().map(|o| o.cost));
-        if n <= MAX_LEAF && cost.map_or(true, |c| c >= blocks(n)) {
+        let leaf = match role {
+            SplitRole::Node => n <= MAX_LEAF && cost.map_or(true, |c| c - TRAVERSAL_COST + NODE_COST >= blocks(n)),
+            SplitRole::Lane { node_area } => cost.map_or(true, |c| n <= MAX_LEAF && c >= blocks(n) && self.half_area() >= SPANNING * node_area),
+        };
+        if leaf {
             return Err(self);
         }
         let BuildSet { refs, cbounds, depth, offset, root, .. } = self;
@@ -322,10 +370,35 @@ mod tests {
         let mut four = refs_of(LEAF_ALWAYS);
         let shapes: Vec<crate::scene::Shape> = Vec::new();
         let prims = PrimTable::new(&shapes);
-        assert!(BuildSet::root(&mut four, LEAF_ALWAYS).unwrap().split(&prims).is_err(), "{LEAF_ALWAYS} primitives must make a leaf");
+        assert!(BuildSet::root(&mut four, LEAF_ALWAYS).unwrap().split(&prims, SplitRole::Node).is_err(), "{LEAF_ALWAYS} primitives must make a leaf");
         let mut five = refs_of(LEAF_ALWAYS + 1);
-        let (l, r) = BuildSet::root(&mut five, LEAF_ALWAYS + 1).unwrap().split(&prims).ok().expect("five far-apart primitives must split");
+        let (l, r) = BuildSet::root(&mut five, LEAF_ALWAYS + 1).unwrap().split(&prims, SplitRole::Node).ok().expect("five far-apart primitives must split");
         assert_eq!((l.len(), r.len()), (3, 2));
+    }
+
+    /// Six long slivers lying across one another (each spans the set's x,
+    /// their centroids a little apart in y): every split leaves both sides
+    /// nearly the set's size, so the SAH prefers one leaf of two blocks. A
+    /// node of its own keeps them together, and so does a node being
+    /// filled that they span; filled into a node ten times wider, they are
+    /// split like any child above a block.
+    #[test]
+    fn leaves_are_decided_against_a_node_visit_and_split_when_filling_a_node() {
+        let sliver = |i: usize| {
+            let y = i as f32 * 0.01;
+            Aabb { min: glam::Vec3::new(0.0, y, 0.0), max: glam::Vec3::new(10.0, y + 1.0, 0.1) }
+        };
+        let shapes: Vec<crate::scene::Shape> = Vec::new();
+        let prims = PrimTable::new(&shapes);
+        let split_as = |role: fn(f32) -> SplitRole| {
+            let mut refs: Vec<PrimRef> = (0..6).map(|i| PrimRef::new(&sliver(i), i as u32)).collect();
+            let set = BuildSet::root(&mut refs, 6).unwrap();
+            let area = set.half_area();
+            set.split(&prims, role(area)).is_ok()
+        };
+        assert!(!split_as(|_| SplitRole::Node), "the SAH prefers one leaf to a node");
+        assert!(!split_as(|a| SplitRole::Lane { node_area: a }), "a set spanning its node stays a leaf");
+        assert!(split_as(|a| SplitRole::Lane { node_area: 10.0 * a }), "a child filled into a wider node is split");
     }
 
     /// Indices survive the split encoding up to the largest `u32`, and the

@@ -8,7 +8,7 @@
 //! layout never depends on the thread count.
 
 use super::{Leaf, Node, TriGroup, EMPTY, INLINE_BIT, INLINE_GROUP_LIMIT, LANES, LEAF_BIT};
-use crate::accel::bvh::{BuildSet, PrimRef};
+use crate::accel::bvh::{BuildSet, PrimRef, SplitRole};
 use crate::accel::prims::{Prim, PrimTable};
 use crate::geometry::Aabb;
 use rayon::prelude::*;
@@ -86,10 +86,12 @@ struct Kid<'a> {
     leaf: bool,
 }
 
-/// The children of a wide node whose set split into `l` and `r`: split the
-/// child with the largest box again until `W` children (or only leaves)
-/// remain, keeping them in order, as collapsing the binary SAH tree would.
-fn gather<'a, const W: usize>(l: BuildSet<'a>, r: BuildSet<'a>, prims: &PrimTable) -> Vec<Kid<'a>> {
+/// The children of a wide node (half-area `node_area`) whose set split into
+/// `l` and `r`: split the child with the largest box again until `W`
+/// children (or only leaves) remain, keeping them in order, as collapsing
+/// the binary SAH tree would; which children stay leaves is
+/// `SplitRole::Lane`'s.
+fn gather<'a, const W: usize>(l: BuildSet<'a>, r: BuildSet<'a>, node_area: f32, prims: &PrimTable) -> Vec<Kid<'a>> {
     let mut kids = Vec::with_capacity(W);
     kids.push(Kid { set: l, leaf: false });
     kids.push(Kid { set: r, leaf: false });
@@ -102,7 +104,7 @@ fn gather<'a, const W: usize>(l: BuildSet<'a>, r: BuildSet<'a>, prims: &PrimTabl
             }
         }
         let Some((i, _)) = best else { break };
-        match kids.remove(i).set.split(prims) {
+        match kids.remove(i).set.split(prims, SplitRole::Lane { node_area }) {
             Ok((a, b)) => {
                 kids.insert(i, Kid { set: b, leaf: false });
                 kids.insert(i, Kid { set: a, leaf: false });
@@ -115,8 +117,8 @@ fn gather<'a, const W: usize>(l: BuildSet<'a>, r: BuildSet<'a>, prims: &PrimTabl
 
 impl<const W: usize> Part<W> {
     /// An empty part with room for a subtree of `prims` primitives: the
-    /// 8-wide tree of the 1M mesh has a node per 13 triangles and a leaf
-    /// per 3.7. A subtree large enough to be built in pieces holds only its
+    /// 8-wide tree of the 1M mesh has a node per 16 triangles and a leaf
+    /// per 3.6. A subtree large enough to be built in pieces holds only its
     /// top here, so it gets no room in advance.
     pub(super) fn with_room_for(prims: usize) -> Self {
         if prims > PARALLEL_BUILD {
@@ -129,11 +131,12 @@ impl<const W: usize> Part<W> {
     /// depth first, leaves recorded in order; returns its child code.
     pub(super) fn build(&mut self, set: BuildSet, prims: &PrimTable) -> u32 {
         let n = set.len();
-        let (l, r) = match set.split(prims) {
+        let node_area = set.half_area();
+        let (l, r) = match set.split(prims, SplitRole::Node) {
             Ok(sides) => sides,
             Err(set) => return self.leaf(prims, &set),
         };
-        let kids = gather::<W>(l, r, prims);
+        let kids = gather::<W>(l, r, node_area, prims);
         let idx = self.push_node();
         if n > PARALLEL_BUILD {
             // Leaves here, interior children as pieces, in parallel.

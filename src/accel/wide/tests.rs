@@ -399,7 +399,8 @@ fn frustum_accepts_coherent_packets() {
 /// force, and the flattened arrays are the same whatever the thread count.
 #[test]
 fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
-    let mut scene = procedural_scene(120_000);
+    // Large enough for more than one chunk of `sah`'s sum (8192 nodes).
+    let mut scene = procedural_scene(180_000);
     let mut rng = Rng::new(3, 1);
     for _ in 0..40 {
         let c = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.4 - 1.2;
