@@ -47,26 +47,18 @@ const SPANNING: f32 = 0.5;
 /// being lanes of the same node, so a child above a block is split whatever
 /// the binary SAH says; the SAH decides leaves where a set would become a
 /// node of its own, against a whole node visit (`NODE_COST`), as Embree's
-/// builder does. Deciding leaves at every binary split at `TRAVERSAL_COST`
-/// instead built a node per 13 triangles of the 1M sphere where this builds
-/// one per 16, 5-9 % more memory, and SAH costs at or a little above
-/// Embree's where these are at or a little below (maxplanck 12.55 → 12.47,
-/// subdivided bunny 9.93 → 9.88, grass 98.8 → 97.8; Embree 4: 12.48, 9.95,
-/// 98.3). Traversal, native ÷ Embree 4 in one run, two runs each: the
-/// subdivided bunny's random batches 0.93-1.00 → 1.04-1.13 and its diffuse
-/// single rays 0.85-0.91 → 0.94-1.11, grass's single rays 0.84-0.96 →
-/// 0.93-1.03; the 5M sphere's random single rays 0.86-0.87 → 0.77-0.82;
-/// the rest within this machine's noise (`docs/notes`).
+/// builder does. Deciding leaves at every binary split instead (at
+/// `TRAVERSAL_COST`) built a fifth more nodes and SAH costs a little above
+/// Embree's, where these are at or just below them; the subdivided bunny's
+/// and grass's rays gained most (`docs/notes/2026-11-30-node-fill.md`).
 ///
 /// One exception keeps a set spanning its node a leaf where the binary SAH
 /// prefers it: primitives as large as the node (arch's ground and floor
 /// slabs, two triangles each crossing everything) then stay in a leaf near
 /// the root, which shadow rays test at once and which occludes nearly all
-/// of them. Split down like the rest, arch's SAH cost falls by a fifth
-/// (4.77 → 3.84, Embree's 4.03) and its closest hits gain 10-30 %, but its
-/// shadow batches ran 3-7 times slower (2.7 → 0.9 and 2.5 → 0.35 times
-/// Embree 4's, 2M and 10M triangles): the SAH counts closest-hit work and
-/// nothing of where any-hit rays stop.
+/// of them. Split down like the rest, they cut arch's SAH cost by a fifth
+/// but made its shadow batches 3-7 times slower: the SAH counts
+/// closest-hit work and nothing of where any-hit rays stop.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum SplitRole {
     /// The set becomes a node unless the SAH prefers a leaf: its leaf cost
@@ -288,7 +280,7 @@ impl<'a> BuildSet<'a> {
         let cost = spatial.map(|s| s.cost).or(object.as_ref().map(|o| o.cost));
         let leaf = match role {
             SplitRole::Node => n <= MAX_LEAF && cost.map_or(true, |c| c - TRAVERSAL_COST + NODE_COST >= blocks(n)),
-            SplitRole::Lane { node_area } => cost.map_or(true, |c| n <= MAX_LEAF && c >= blocks(n) && self.half_area() >= SPANNING * node_area),
+            SplitRole::Lane { node_area } => n <= MAX_LEAF && cost.map_or(true, |c| c >= blocks(n) && self.half_area() >= SPANNING * node_area),
         };
         if leaf {
             return Err(self);
@@ -399,6 +391,14 @@ mod tests {
         assert!(!split_as(|_| SplitRole::Node), "the SAH prefers one leaf to a node");
         assert!(!split_as(|a| SplitRole::Lane { node_area: a }), "a set spanning its node stays a leaf");
         assert!(split_as(|a| SplitRole::Lane { node_area: 10.0 * a }), "a child filled into a wider node is split");
+        // More than `MAX_LEAF` coincident primitives have no SAH split; in
+        // either role they are split at the median, never one leaf.
+        for role in [SplitRole::Node, SplitRole::Lane { node_area: 1.0 }] {
+            let b = Aabb { min: glam::Vec3::ZERO, max: glam::Vec3::ONE };
+            let mut refs: Vec<PrimRef> = (0..3 * MAX_LEAF as u32).map(|i| PrimRef::new(&b, i)).collect();
+            let n = refs.len();
+            assert!(BuildSet::root(&mut refs, n).unwrap().split(&prims, role).is_ok(), "{role:?}: {n} coincident primitives made one leaf");
+        }
     }
 
     /// Indices survive the split encoding up to the largest `u32`, and the
