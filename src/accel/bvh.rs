@@ -40,6 +40,27 @@ const NODE_COST: f32 = 1.0;
 /// node's half-area may stay a leaf (`SplitRole::Lane`).
 const SPANNING: f32 = 0.5;
 
+/// Leaves are tested `BLOCK` triangles at a time (`wide::LANES`), so the SAH
+/// counts a side's primitives in whole blocks, as Embree's builder does: a
+/// leaf of 3 triangles costs as much to test as one of 4. Counting single
+/// primitives left the 1M-triangle mesh's groups half empty (2.03 triangles
+/// per group of 4), doubling leaf memory and wasting lanes.
+const BLOCK: usize = 4;
+
+#[inline]
+fn blocks(n: usize) -> f32 {
+    n.div_ceil(BLOCK) as f32
+}
+/// Nodes with more primitives than this are also binned in parallel (the top
+/// levels, where the subtree parallelism has not started yet), in chunks of
+/// `BIN_CHUNK`. Bin counts and box unions are exact, so the tree does not
+/// depend on the thread count.
+const PARALLEL_BINNING: usize = 1 << 16;
+const BIN_CHUNK: usize = 1 << 14;
+/// Past this depth splits are medians: at most 32 more levels, so the
+/// traversal stacks in `wide` are bounded.
+const MAX_SAH_DEPTH: usize = 64;
+
 /// What a set is split for, which decides when it is a leaf instead.
 ///
 /// A wide node is filled by splitting its largest child again until it has
@@ -69,26 +90,6 @@ pub(super) enum SplitRole {
     /// at least `SPANNING` of the node and the binary SAH prefers a leaf.
     Lane { node_area: f32 },
 }
-/// Leaves are tested `BLOCK` triangles at a time (`wide::LANES`), so the SAH
-/// counts a side's primitives in whole blocks, as Embree's builder does: a
-/// leaf of 3 triangles costs as much to test as one of 4. Counting single
-/// primitives left the 1M-triangle mesh's groups half empty (2.03 triangles
-/// per group of 4), doubling leaf memory and wasting lanes.
-const BLOCK: usize = 4;
-
-#[inline]
-fn blocks(n: usize) -> f32 {
-    n.div_ceil(BLOCK) as f32
-}
-/// Nodes with more primitives than this are also binned in parallel (the top
-/// levels, where the subtree parallelism has not started yet), in chunks of
-/// `BIN_CHUNK`. Bin counts and box unions are exact, so the tree does not
-/// depend on the thread count.
-const PARALLEL_BINNING: usize = 1 << 16;
-const BIN_CHUNK: usize = 1 << 14;
-/// Past this depth splits are medians: at most 32 more levels, so the
-/// traversal stacks in `wide` are bounded.
-const MAX_SAH_DEPTH: usize = 64;
 
 /// Build-time primitive reference: the primitive's box as two SIMD vectors,
 /// 32 bytes, the primitive's index carried in the `w` lanes (as Embree's

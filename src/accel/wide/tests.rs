@@ -151,8 +151,6 @@ fn spatial_split_trees_match_brute_force() {
     let mut interleaved = WideBvh::<8>::build_with_splits(&shapes, 0.5);
     if interleaved.policy.avx() {
         interleaved.policy.closest = ClosestBatches::Interleaved;
-    }
-    if interleaved.policy.avx() {
         interleaved.policy.shadows = policy::ShadowBatches::Streams;
     }
     candidates.push(("interleaved, shadow streams", interleaved));
