@@ -51,6 +51,35 @@ fn cold_lines_estimate_matches_the_exact_sum() {
     }
 }
 
+/// Which closest-hit batches are interleaved follows the tree's size and
+/// its cold lines: none on a small mesh (1.9 MB) or on the architecture
+/// scene (mostly cached: 13 MB, 0.3 cold lines), the incoherent ones on a
+/// 100k-triangle mesh (6.6 MB, 10 cold lines), every one on a mesh above
+/// `INTERLEAVE_BYTES`; and the policy's batch way with them.
+#[test]
+fn interleaving_reaches_incoherent_batches_on_middling_trees() {
+    use super::interleave::{InterleaveReach, INTERLEAVE_BYTES, INTERLEAVE_INCOHERENT_BYTES};
+    for (spec, want) in [("sphere:30k", InterleaveReach::None), ("arch:200k", InterleaveReach::None), ("sphere:100k", InterleaveReach::Incoherent), ("sphere:300k", InterleaveReach::All)] {
+        let b = WideBvh::<8>::build(&crate::scene::generated::for_tests(spec).shapes);
+        let bytes = crate::accel::Traversal::memory_bytes(&b);
+        assert_eq!(b.interleave_reach(), want, "{spec}: {bytes} bytes");
+        match want {
+            InterleaveReach::None if spec.starts_with("sphere") => assert!(bytes < INTERLEAVE_INCOHERENT_BYTES, "{spec}: {bytes} bytes"),
+            InterleaveReach::None => assert!(bytes >= INTERLEAVE_INCOHERENT_BYTES, "{spec}: the test needs a tree left out by its cold lines"),
+            InterleaveReach::Incoherent => assert!((INTERLEAVE_INCOHERENT_BYTES..INTERLEAVE_BYTES).contains(&bytes), "{spec}: {bytes} bytes"),
+            InterleaveReach::All => assert!(bytes >= INTERLEAVE_BYTES, "{spec}: {bytes} bytes"),
+        }
+        if b.policy.avx() {
+            let way = match want {
+                InterleaveReach::None => policy::ClosestBatches::StreamsWhereCoherent,
+                InterleaveReach::Incoherent => policy::ClosestBatches::StreamsElseInterleaved,
+                InterleaveReach::All => policy::ClosestBatches::Interleaved,
+            };
+            assert_eq!(b.policy.closest, way, "{spec}");
+        }
+    }
+}
+
 /// Occlusion answers do not depend on the any-hit child order, ray by ray
 /// and in packets; and the choice made when the tree is built
 /// (`any_order_of`) follows the work the benchmark's shadow rays count:

@@ -234,6 +234,7 @@ mod tests {
     use crate::accel::brute::BruteForce;
     use crate::accel::Traversal;
     use crate::accel::workloads::{camera_rays, diffuse_rays, tile_order};
+    use super::super::policy::ClosestBatches;
     use crate::scene::generated::for_tests as load_bench_scene;
     use crate::camera::Camera;
 
@@ -270,7 +271,8 @@ mod tests {
 
     /// On bench scenes, a tile's diffuse rays (the batches that stream)
     /// and random rays find exactly the single-ray hits, through the
-    /// batch call, whichever way the batch goes.
+    /// batch call, whichever way the batch goes (incoherent ones one ray
+    /// at a time or interleaved).
     #[test]
     fn streamed_diffuse_rays_find_the_single_ray_hits() {
         if !avx_or_skip("the closest-hit streams") {
@@ -278,7 +280,7 @@ mod tests {
         }
         for spec in ["subdiv:CBbunny:100k", "grass:30k", "arch:50k"] {
             let scene = load_bench_scene(spec);
-            let bvh = WideBvh::<8>::build(&scene.shapes);
+            let mut bvh = WideBvh::<8>::build(&scene.shapes);
             let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
             let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
             let random = crate::accel::workloads::random_rays(&scene, 4096, 2);
@@ -292,6 +294,14 @@ mod tests {
                 }
                 assert!(via_streams == want, "{spec} {what}: streamed hits differ from single rays");
                 assert!(via_batch == want, "{spec} {what}: batch hits differ from single rays");
+                // Incoherent batches interleaved instead of one ray at a time.
+                let chosen = bvh.policy.closest;
+                bvh.policy.closest = ClosestBatches::StreamsElseInterleaved;
+                for (r, b) in rays.chunks(1024).zip(via_batch.chunks_mut(1024)) {
+                    bvh.intersect_batch(r, b);
+                }
+                bvh.policy.closest = chosen;
+                assert!(via_batch == want, "{spec} {what}: batch hits, streams else interleaved, differ from single rays");
             }
             assert!(bvh.streams_pay(&diffuse[..1024]), "{spec}: a tile's diffuse rays do not stream");
             assert!(!bvh.streams_pay(&random[..1024]), "{spec}: random rays stream");

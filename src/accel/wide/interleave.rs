@@ -1,6 +1,7 @@
-//! Incoherent closest-hit batches over large structures traced
-//! `IN_FLIGHT` rays at a time, step by step in turn, so one ray's node fetch
-//! from memory overlaps the other rays' box and triangle tests.
+//! Incoherent closest-hit batches over structures whose rays miss the
+//! core's caches traced `IN_FLIGHT` rays at a time, step by step in turn, so
+//! one ray's node fetch overlaps the other rays' box and triangle tests
+//! (on large structures, every closest-hit batch: `interleave_reach`).
 //!
 //! On the 1M-triangle mesh, random rays spent 42 % of their samples on the
 //! instruction after a node load: a lone ray's traversal is a chain of
@@ -43,6 +44,21 @@ pub(super) const INTERLEAVE_BYTES: usize = 16 << 20;
 pub(super) const HOT_ITEMS: usize = 4096;
 pub(super) const COLD_LINES: f64 = 3.0;
 
+/// Trees from this size up to `INTERLEAVE_BYTES` whose rays are expected to
+/// fetch `COLD_LINES` trace their incoherent closest-hit batches
+/// interleaved, and keep packets for camera rays and streams for coherent
+/// batches (`ClosestBatches::StreamsElseInterleaved`): their rays miss the
+/// core's own caches and wait on the shared one. Random batches, native ÷
+/// Embree 4 in one run (2-vCPU AMD EPYC, Zen 3; 1 thread, four runs each,
+/// one ray at a time / interleaved; size and cold lines in brackets):
+/// sphere 200k 0.82-0.94 / 1.18-1.34 (12.7 MB, 13.1), grass 200k
+/// 0.84-1.09 / 1.72-1.76 (13.2 MB, 34.2), sphere 100k 0.79-0.90 /
+/// 0.98-1.22 (6.6 MB, 10.2); camera and diffuse batches unchanged. Below
+/// this size mixed (two runs each): sphere 50k 0.77-0.91 / 0.86-1.00 (3.3
+/// MB, 6.9), maxplanck 0.74-0.87 / 0.86-0.94 (3.4 MB, 7.5); and the small
+/// scans (cow, beetle, CBbunny, under 2 MB) lost 9-17 %.
+pub(super) const INTERLEAVE_INCOHERENT_BYTES: usize = 4 << 20;
+
 /// Rays in flight per thread. With each walker prefetching the one child
 /// it enters (`step`), more walkers keep more misses in flight: random
 /// batches, native ÷ Embree 4 in one run, 1 thread, two runs, 4 / 8 / 12
@@ -52,6 +68,14 @@ pub(super) const COLD_LINES: f64 = 3.0;
 /// (4 in flight measured at 2 threads). Without the prefetch 4 had been
 /// best of 2, 4 and 8.
 const IN_FLIGHT: usize = 12;
+
+/// Which closest-hit batches a tree traces interleaved (`interleave_reach`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum InterleaveReach {
+    None,
+    Incoherent,
+    All,
+}
 
 /// One ray's traversal state between steps; cache-aligned, which also
 /// aligns the frame of the function holding the walkers (`WalkStack`).
@@ -89,11 +113,20 @@ impl Walker {
 }
 
 impl<const W: usize> WideBvh<W> {
-    /// Whether incoherent batches gain from interleaving on this tree: it
-    /// is large, and its rays are expected to miss the caches.
-    pub(super) fn interleave_pays(&self) -> bool {
+    /// Which closest-hit batches gain from interleaving on this tree: none
+    /// where it is small or its rays are expected to stay in the caches;
+    /// every batch where it is large (`INTERLEAVE_BYTES`); the incoherent
+    /// ones in between (`INTERLEAVE_INCOHERENT_BYTES`).
+    pub(super) fn interleave_reach(&self) -> InterleaveReach {
         use super::Traversal;
-        self.memory_bytes() >= INTERLEAVE_BYTES && self.cold_lines(HOT_ITEMS).0 >= COLD_LINES
+        let bytes = self.memory_bytes();
+        if bytes < INTERLEAVE_INCOHERENT_BYTES || self.cold_lines(HOT_ITEMS).0 < COLD_LINES {
+            InterleaveReach::None
+        } else if bytes >= INTERLEAVE_BYTES {
+            InterleaveReach::All
+        } else {
+            InterleaveReach::Incoherent
+        }
     }
 
     /// `hits[i]` = the closest hit of `rays[i]`, `IN_FLIGHT` rays at a time.

@@ -382,8 +382,8 @@ impl<const W: usize> Traversal for WideBvh<W> {
             return unsafe {
                 match self.policy.closest {
                     ClosestBatches::Streams => self.closest_streams(rays, hits),
-                    ClosestBatches::StreamsWhereCoherent if self.streams_pay(rays) => self.closest_streams(rays, hits),
-                    ClosestBatches::Interleaved => self.closest_interleaved_avx(rays, hits),
+                    ClosestBatches::StreamsWhereCoherent | ClosestBatches::StreamsElseInterleaved if self.streams_pay(rays) => self.closest_streams(rays, hits),
+                    ClosestBatches::Interleaved | ClosestBatches::StreamsElseInterleaved => self.closest_interleaved_avx(rays, hits),
                     ClosestBatches::Single | ClosestBatches::StreamsWhereCoherent => self.closest_all_avx(rays, hits),
                 }
             };

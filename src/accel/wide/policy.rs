@@ -4,9 +4,11 @@
 //! options, the CPU and the tree itself, and never changes afterwards: the
 //! same batch always takes the same way, whatever ran before it. Only the
 //! way a closest-hit batch goes may depend on the batch (`ClosestBatches`'
-//! `StreamsWhereCoherent`), and then on nothing but the batch's own rays.
+//! `StreamsWhereCoherent` and `StreamsElseInterleaved`), and then on
+//! nothing but the batch's own rays.
 //! No choice changes an answer (every way gives the scalar code's bits).
 
+use super::interleave::InterleaveReach;
 use super::stack::ChildOrder;
 use super::WideBvh;
 use crate::accel::{BatchWay, NativeIsa, NativeOptions, ShadowWay, Traversal};
@@ -44,6 +46,10 @@ pub(super) enum ClosestBatches {
     /// In streams where the batch's own rays start close together
     /// (`streams_pay`), else one ray at a time.
     StreamsWhereCoherent,
+    /// In streams where the batch's own rays start close together, else
+    /// interleaved: a tree of middling size whose incoherent rays miss
+    /// the nearer caches (`interleave_reach`).
+    StreamsElseInterleaved,
 }
 
 /// How coherent occlusion batches (`occluded_coherent`) go.
@@ -111,7 +117,8 @@ impl Policy {
         let avx = W == 8 && avx_available_for(options.isa);
         let boxes = if avx { BoxIsa::Avx2 } else { BoxIsa::Sse2 };
         let packets = if W == 8 && avx512_available(options.isa) { PacketIsa::Avx512 } else { PacketIsa::Avx2 };
-        let interleave = avx && tree.interleave_pays();
+        let reach = if avx { tree.interleave_reach() } else { InterleaveReach::None };
+        let interleave = reach == InterleaveReach::All;
         // `avx` implies `W` = 8, which streams need.
         let streams = avx;
         let closest = match options.batch {
@@ -122,6 +129,7 @@ impl Policy {
             // 1M 1.27-1.40 / 1.53-1.61, subdivided bunny 1.5M 1.00-1.34 /
             // 1.43, sphere 5M 1.16-1.27 / 2.18, grass 2M 0.80 / 1.27-1.34.
             BatchWay::Auto if interleave => ClosestBatches::Interleaved,
+            BatchWay::Auto if reach == InterleaveReach::Incoherent => ClosestBatches::StreamsElseInterleaved,
             BatchWay::Auto if streams => ClosestBatches::StreamsWhereCoherent,
             BatchWay::Streams if streams => ClosestBatches::Streams,
             BatchWay::Interleaved if avx => ClosestBatches::Interleaved,
@@ -184,6 +192,7 @@ impl Policy {
             ClosestBatches::Interleaved => "closest hits interleaved (camera rays too)",
             ClosestBatches::Streams => "closest-hit streams",
             ClosestBatches::StreamsWhereCoherent => "closest-hit streams where coherent",
+            ClosestBatches::StreamsElseInterleaved => "closest-hit streams where coherent, else interleaved",
         };
         let shadows = match self.shadows {
             ShadowBatches::Packets => "shadow packets",
