@@ -279,11 +279,11 @@ impl<'a> BuildSet<'a> {
             _ => None,
         };
         let cost = spatial.map(|s| s.cost).or(object.as_ref().map(|o| o.cost));
-        let leaf = match role {
-            SplitRole::Node => n <= MAX_LEAF && cost.map_or(true, |c| c - TRAVERSAL_COST + NODE_COST >= blocks(n)),
-            SplitRole::Lane { node_area } => n <= MAX_LEAF && cost.map_or(true, |c| c >= blocks(n) && self.half_area() >= SPANNING * node_area),
+        let leaf_preferred = |c: f32| match role {
+            SplitRole::Node => c - TRAVERSAL_COST + NODE_COST >= blocks(n),
+            SplitRole::Lane { node_area } => c >= blocks(n) && self.half_area() >= SPANNING * node_area,
         };
-        if leaf {
+        if n <= MAX_LEAF && cost.map_or(true, leaf_preferred) {
             return Err(self);
         }
         let BuildSet { refs, cbounds, depth, offset, root, .. } = self;
