@@ -15,8 +15,7 @@
 //! watertight test and the same tie-break (`closer`), so its closest hit is
 //! the same whatever order the leaves come in.
 
-use super::kernels::{slab_planes, Slab};
-use super::stream::STREAM;
+use super::stream::{octant_planes, octant_streams, ready, StreamRays, STREAM};
 use super::triangle::Shear;
 use super::stack::WalkStack;
 use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
@@ -25,18 +24,6 @@ use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use std::mem::MaybeUninit;
-
-/// A stream's rays: their indices in the batch, their slab constants in
-/// SoA form, and their current closest distances.
-struct StreamRays {
-    index: [u32; STREAM],
-    o: [[f32; STREAM]; 3],
-    inv: [[f32; STREAM]; 3],
-    tmin: [f32; STREAM],
-    tmax: [f32; STREAM],
-    /// `tmax` enlarged by `ROBUST_SCALE`, as the slab test enlarges it.
-    far: [f32; STREAM],
-}
 
 /// Batches of fewer rays never stream: a stream of one octant's few rays
 /// shares little.
@@ -79,104 +66,40 @@ impl<const W: usize> WideBvh<W> {
         if self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
             return self.closest_all::<true>(rays, hits);
         }
-        let mut waiting = [[0u32; STREAM]; 8];
-        let mut count = [0usize; 8];
-        for (i, r) in rays.iter().enumerate() {
-            hits[i] = None;
-            if !r.is_valid() {
-                continue;
-            }
-            let oct = (r.dir.x.is_sign_negative() as usize) | (r.dir.y.is_sign_negative() as usize) << 1 | (r.dir.z.is_sign_negative() as usize) << 2;
-            waiting[oct][count[oct]] = i as u32;
-            count[oct] += 1;
-            if count[oct] == STREAM {
-                self.closest_stream(rays, &waiting[oct][..STREAM], oct, hits);
-                count[oct] = 0;
-            }
-        }
-        for oct in 0..8 {
-            if count[oct] > 0 {
-                self.closest_stream(rays, &waiting[oct][..count[oct]], oct, hits);
-            }
-        }
+        hits.fill(None);
+        octant_streams(rays, |which, oct| self.closest_stream(rays, which, oct, hits));
     }
 
     /// One stream: `which` (at most `STREAM` indices into `rays`, all valid,
     /// all of octant `oct`).
     #[inline(always)]
     unsafe fn closest_stream(&self, rays: &[Ray], which: &[u32], oct: usize, hits: &mut [Option<Hit>]) {
-        use std::arch::x86_64::*;
         let n = which.len();
-        let mut s = StreamRays { index: [0; STREAM], o: [[0.0; STREAM]; 3], inv: [[0.0; STREAM]; 3], tmin: [0.0; STREAM], tmax: [0.0; STREAM], far: [0.0; STREAM] };
-        for (k, &i) in which.iter().enumerate() {
-            let r = &rays[i as usize];
-            let slab = Slab::new(r);
-            s.index[k] = i;
-            for a in 0..3 {
-                s.o[a][k] = slab.o[a];
-                s.inv[a][k] = slab.inv[a];
-            }
-            s.tmin[k] = r.tmin;
-            s.tmax[k] = r.tmax;
-            s.far[k] = r.tmax * crate::accel::bvh::ROBUST_SCALE;
-        }
+        let mut s = StreamRays::new(rays, which);
         let mut best: [Option<Hit>; STREAM] = [None; STREAM];
-        let near_plane = [0, 1, 2].map(|a| if oct >> a & 1 != 0 { 3 + a } else { a });
-        let far_plane = near_plane.map(|p| (p + 3) % 6);
-        let all: u64 = if n == STREAM { u64::MAX } else { (1u64 << n) - 1 };
+        let planes = octant_planes(oct);
         let mut setup: u64 = 0;
         let mut rts: [MaybeUninit<RayTransform>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
         let mut shears: [MaybeUninit<Shear>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
         let mut stack = WalkStack::<u64>::new();
         let mut sp = 0;
-        let (mut code, mut entered) = (self.tree.root, all);
-        let inf = _mm256_set1_ps(f32::INFINITY);
+        let (mut code, mut entered) = (self.tree.root, StreamRays::all(n));
         loop {
             let node = &self.tree.nodes[code as usize];
-            let rows = node.bounds.as_ptr() as *const f32;
-            let load = |p: usize| _mm256_load_ps(rows.add(p * W));
-            let lo = [load(near_plane[0]), load(near_plane[1]), load(near_plane[2])];
-            let hi = [load(far_plane[0]), load(far_plane[1]), load(far_plane[2])];
-            let mut masks = [_mm256_setzero_si256(); 2];
-            let mut near = inf;
-            for (half, m) in masks.iter_mut().enumerate() {
-                let mut t = (entered >> (32 * half)) as u32;
-                while t != 0 {
-                    let r = t.trailing_zeros() as usize;
-                    t &= t - 1;
-                    let i = 32 * half + r;
-                    let (t0, t1) = slab_planes::<__m256>(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.far[i]);
-                    let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
-                    *m = _mm256_or_si256(*m, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << r)));
-                    near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));
-                }
-            }
-            let none = _mm256_cmpeq_epi32(_mm256_or_si256(masks[0], masks[1]), _mm256_setzero_si256());
-            let entered_children = !_mm256_movemask_ps(_mm256_castsi256_ps(none)) as u32 & 0xff;
-            if entered_children != 0 {
-                let mut child_rays = [[0u32; 8]; 2];
-                let mut child_near = [0.0f32; 8];
-                _mm256_storeu_si256(child_rays[0].as_mut_ptr() as *mut __m256i, masks[0]);
-                _mm256_storeu_si256(child_rays[1].as_mut_ptr() as *mut __m256i, masks[1]);
-                _mm256_storeu_ps(child_near.as_mut_ptr(), near);
-                let mut b = entered_children;
-                while b != 0 {
-                    let lane = b.trailing_zeros() as usize;
-                    b &= b - 1;
-                    self.prefetch(node.child[lane]);
-                }
+            let e = self.stream_enter(node, &planes, &s, entered);
+            if e.children != 0 {
                 let mark = sp;
-                let mut b = entered_children;
+                let mut b = e.children;
                 while b != 0 {
                     let lane = b.trailing_zeros() as usize;
                     b &= b - 1;
                     let child = node.child[lane];
-                    let r = child_rays[0][lane] as u64 | (child_rays[1][lane] as u64) << 32;
+                    let r = e.rays(lane);
                     if r == 0 || child == EMPTY {
                         continue;
                     }
                     if child & LEAF_BIT == 0 {
-                        stack.push(&mut sp, child, child_near[lane], r);
+                        stack.push(&mut sp, child, e.near[lane], r);
                         continue;
                     }
                     let leaf = self.leaf_of(child);
@@ -184,7 +107,7 @@ impl<const W: usize> WideBvh<W> {
                     while m != 0 {
                         let k = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        super::stream::ready(k, &mut setup, &mut rts, &mut shears, rays, s.index[k]);
+                        ready(k, &mut setup, &mut rts, &mut shears, rays, s.index[k]);
                         let ray = &rays[s.index[k] as usize];
                         let (b, t) = (&mut best[k], &mut s.tmax[k]);
                         self.leaf(&leaf, ray, rts[k].assume_init_ref(), shears[k].assume_init_ref(), *t, &mut |h: Hit| {

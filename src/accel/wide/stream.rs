@@ -22,7 +22,7 @@
 use super::kernels::{slab_planes, Slab};
 use super::triangle::Shear;
 use super::stack::WalkStack;
-use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
+use super::{ChildOrder, Node, WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::Hit;
 use crate::geometry::RayTransform;
 use crate::ray::Ray;
@@ -32,15 +32,94 @@ use std::mem::MaybeUninit;
 pub(super) const STREAM: usize = 64;
 
 /// A stream's rays: their indices in the batch, and their slab constants in
-/// SoA form (broadcast one ray at a time by the node tests).
-struct StreamRays {
-    index: [u32; STREAM],
-    o: [[f32; STREAM]; 3],
-    inv: [[f32; STREAM]; 3],
-    tmin: [f32; STREAM],
-    tmax: [f32; STREAM],
+/// SoA form (broadcast one ray at a time by the node tests). Shared with
+/// the closest-hit streams (`hit_stream`), which lower `tmax` and `far` as
+/// their rays find hits.
+pub(super) struct StreamRays {
+    pub(super) index: [u32; STREAM],
+    pub(super) o: [[f32; STREAM]; 3],
+    pub(super) inv: [[f32; STREAM]; 3],
+    pub(super) tmin: [f32; STREAM],
+    pub(super) tmax: [f32; STREAM],
     /// `tmax` enlarged by `ROBUST_SCALE`, as the slab test enlarges it.
-    far: [f32; STREAM],
+    pub(super) far: [f32; STREAM],
+}
+
+impl StreamRays {
+    /// The stream of `rays[i]` for `i` in `which` (at most `STREAM`, all valid).
+    #[inline(always)]
+    pub(super) fn new(rays: &[Ray], which: &[u32]) -> Self {
+        let mut s = StreamRays { index: [0; STREAM], o: [[0.0; STREAM]; 3], inv: [[0.0; STREAM]; 3], tmin: [0.0; STREAM], tmax: [0.0; STREAM], far: [0.0; STREAM] };
+        for (k, &i) in which.iter().enumerate() {
+            let r = &rays[i as usize];
+            let slab = Slab::new(r);
+            s.index[k] = i;
+            for a in 0..3 {
+                s.o[a][k] = slab.o[a];
+                s.inv[a][k] = slab.inv[a];
+            }
+            s.tmin[k] = r.tmin;
+            s.tmax[k] = r.tmax;
+            s.far[k] = r.tmax * crate::accel::bvh::ROBUST_SCALE;
+        }
+        s
+    }
+
+    /// The mask of the stream's first `n` rays.
+    pub(super) fn all(n: usize) -> u64 {
+        if n == STREAM { u64::MAX } else { (1u64 << n) - 1 }
+    }
+}
+
+/// Calls `trace(which, oct)` for the valid rays of `rays` grouped by the
+/// octant of their directions, in batch order, into streams of up to
+/// `STREAM`: each stream as it fills, then each octant's rest.
+#[inline(always)]
+pub(super) fn octant_streams(rays: &[Ray], mut trace: impl FnMut(&[u32], usize)) {
+    let mut waiting = [[0u32; STREAM]; 8];
+    let mut count = [0usize; 8];
+    for (i, r) in rays.iter().enumerate() {
+        if !r.is_valid() {
+            continue;
+        }
+        let oct = (r.dir.x.is_sign_negative() as usize) | (r.dir.y.is_sign_negative() as usize) << 1 | (r.dir.z.is_sign_negative() as usize) << 2;
+        waiting[oct][count[oct]] = i as u32;
+        count[oct] += 1;
+        if count[oct] == STREAM {
+            trace(&waiting[oct][..STREAM], oct);
+            count[oct] = 0;
+        }
+    }
+    for oct in 0..8 {
+        if count[oct] > 0 {
+            trace(&waiting[oct][..count[oct]], oct);
+        }
+    }
+}
+
+/// The node rows a stream of octant `oct` reads as near and far planes
+/// (indices into `Node::bounds`): one octant fixes them for all its rays.
+pub(super) fn octant_planes(oct: usize) -> ([usize; 3], [usize; 3]) {
+    let near = [0, 1, 2].map(|a| if oct >> a & 1 != 0 { 3 + a } else { a });
+    (near, near.map(|p| (p + 3) % 6))
+}
+
+/// What a stream's rays found at one node (`WideBvh::stream_enter`).
+pub(super) struct Entered {
+    /// The children some ray entered, as bits.
+    pub(super) children: u32,
+    /// Per child, the rays that entered it, as two halves of 32.
+    rays: [[u32; 8]; 2],
+    /// Per child, the nearest entry distance of those rays.
+    pub(super) near: [f32; 8],
+}
+
+impl Entered {
+    /// The rays that entered child `lane`.
+    #[inline(always)]
+    pub(super) fn rays(&self, lane: usize) -> u64 {
+        self.rays[0][lane] as u64 | (self.rays[1][lane] as u64) << 32
+    }
 }
 
 /// Trees smaller than this never stream: they stay in the caches, where
@@ -66,58 +145,79 @@ impl<const W: usize> WideBvh<W> {
     ///
     /// # Safety
     /// The CPU must have AVX2 and the caller must be compiled with it; `W`
-    /// must be 8.
-    #[inline(always)]
+    /// must be 8. Compiled with AVX2 itself (not only inlined into callers
+    /// that are): the closure tracing each stream takes its target
+    /// features from here; without them its intrinsics were calls.
+    #[target_feature(enable = "avx2")]
     pub(super) unsafe fn any_streams(&self, rays: &[Ray], out: &mut [bool], order: ChildOrder) {
         debug_assert!(W == 8);
         if self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
             return self.any_all_ordered::<true>(rays, out, order);
         }
-        // Per octant, the indices of the rays waiting for a full stream.
-        let mut waiting = [[0u32; STREAM]; 8];
-        let mut count = [0usize; 8];
-        for (i, r) in rays.iter().enumerate() {
-            out[i] = false;
-            if !r.is_valid() {
-                continue;
-            }
-            let oct = (r.dir.x.is_sign_negative() as usize) | (r.dir.y.is_sign_negative() as usize) << 1 | (r.dir.z.is_sign_negative() as usize) << 2;
-            waiting[oct][count[oct]] = i as u32;
-            count[oct] += 1;
-            if count[oct] == STREAM {
-                self.any_stream(rays, &waiting[oct][..STREAM], oct, out, order);
-                count[oct] = 0;
+        out.fill(false);
+        octant_streams(rays, |which, oct| self.any_stream(rays, which, oct, out, order));
+    }
+
+    /// Each ray of `todo` tests `node`'s boxes (`Slab::entry_exit`'s
+    /// operations, with the stream's near and far `planes`), which gives
+    /// each child the mask of the rays entering it; every child some ray
+    /// entered starts its fetch first: the leaves are tested right away,
+    /// and their misses then overlap. The node test of both kinds of
+    /// stream.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and the caller must be compiled with it; `W`
+    /// must be 8.
+    #[inline(always)]
+    pub(super) unsafe fn stream_enter(&self, node: &Node<W>, planes: &([usize; 3], [usize; 3]), s: &StreamRays, todo: u64) -> Entered {
+        use std::arch::x86_64::*;
+        let rows = node.bounds.as_ptr() as *const f32;
+        // Spelled out, not `[0, 1, 2].map(..)`: see `RaysSoA::new_with`.
+        let load = |p: usize| _mm256_load_ps(rows.add(p * W));
+        let (near_plane, far_plane) = planes;
+        let lo = [load(near_plane[0]), load(near_plane[1]), load(near_plane[2])];
+        let hi = [load(far_plane[0]), load(far_plane[1]), load(far_plane[2])];
+        // Per child, the rays entering it (two halves of 32) and their
+        // nearest entry distance.
+        let inf = _mm256_set1_ps(f32::INFINITY);
+        let mut masks = [_mm256_setzero_si256(); 2];
+        let mut near = inf;
+        for (half, m) in masks.iter_mut().enumerate() {
+            let mut t = (todo >> (32 * half)) as u32;
+            while t != 0 {
+                let r = t.trailing_zeros() as usize;
+                t &= t - 1;
+                let i = 32 * half + r;
+                let (t0, t1) = slab_planes::<__m256>(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.far[i]);
+                let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
+                *m = _mm256_or_si256(*m, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << r)));
+                near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));
             }
         }
-        for oct in 0..8 {
-            if count[oct] > 0 {
-                self.any_stream(rays, &waiting[oct][..count[oct]], oct, out, order);
+        let none = _mm256_cmpeq_epi32(_mm256_or_si256(masks[0], masks[1]), _mm256_setzero_si256());
+        let children = !_mm256_movemask_ps(_mm256_castsi256_ps(none)) as u32 & 0xff;
+        let mut e = Entered { children, rays: [[0; 8]; 2], near: [0.0; 8] };
+        if children != 0 {
+            _mm256_storeu_si256(e.rays[0].as_mut_ptr() as *mut __m256i, masks[0]);
+            _mm256_storeu_si256(e.rays[1].as_mut_ptr() as *mut __m256i, masks[1]);
+            _mm256_storeu_ps(e.near.as_mut_ptr(), near);
+            let mut b = children;
+            while b != 0 {
+                let lane = b.trailing_zeros() as usize;
+                b &= b - 1;
+                self.prefetch(node.child[lane]);
             }
         }
+        e
     }
 
     /// One stream: `which` (at most `STREAM` indices into `rays`, all valid,
     /// all of octant `oct`).
     #[inline(always)]
     unsafe fn any_stream(&self, rays: &[Ray], which: &[u32], oct: usize, out: &mut [bool], order: ChildOrder) {
-        use std::arch::x86_64::*;
-        let n = which.len();
-        let mut s = StreamRays { index: [0; STREAM], o: [[0.0; STREAM]; 3], inv: [[0.0; STREAM]; 3], tmin: [0.0; STREAM], tmax: [0.0; STREAM], far: [0.0; STREAM] };
-        for (k, &i) in which.iter().enumerate() {
-            let r = &rays[i as usize];
-            let slab = Slab::new(r);
-            s.index[k] = i;
-            for a in 0..3 {
-                s.o[a][k] = slab.o[a];
-                s.inv[a][k] = slab.inv[a];
-            }
-            s.tmin[k] = r.tmin;
-            s.tmax[k] = r.tmax;
-            s.far[k] = r.tmax * crate::accel::bvh::ROBUST_SCALE;
-        }
-        let near_plane = [0, 1, 2].map(|a| if oct >> a & 1 != 0 { 3 + a } else { a });
-        let far_plane = near_plane.map(|p| (p + 3) % 6);
-        let mut active: u64 = if n == STREAM { u64::MAX } else { (1u64 << n) - 1 };
+        let s = StreamRays::new(rays, which);
+        let planes = octant_planes(oct);
+        let mut active = StreamRays::all(which.len());
         // Triangle-test constants, made the first time a ray reaches a leaf.
         let mut setup: u64 = 0;
         let mut rts: [MaybeUninit<RayTransform>; STREAM] = [const { MaybeUninit::uninit() }; STREAM];
@@ -126,68 +226,21 @@ impl<const W: usize> WideBvh<W> {
         let mut stack = WalkStack::<u64>::new();
         let mut sp = 0;
         let (mut code, mut entered) = (self.tree.root, active);
-        let inf = _mm256_set1_ps(f32::INFINITY);
         loop {
             let node = &self.tree.nodes[code as usize];
-            let rows = node.bounds.as_ptr() as *const f32;
-            // Spelled out, not `[0, 1, 2].map(..)`: see `RaysSoA::new_with`.
-            let load = |p: usize| _mm256_load_ps(rows.add(p * W));
-            let lo = [load(near_plane[0]), load(near_plane[1]), load(near_plane[2])];
-            let hi = [load(far_plane[0]), load(far_plane[1]), load(far_plane[2])];
-            // Per child, the rays entering it (two halves of 32) and their
-            // nearest entry distance.
-            let mut masks = [_mm256_setzero_si256(); 2];
-            let mut near = inf;
-            let todo = entered & active;
-            for (half, m) in masks.iter_mut().enumerate() {
-                let mut t = (todo >> (32 * half)) as u32;
-                while t != 0 {
-                    let r = t.trailing_zeros() as usize;
-                    t &= t - 1;
-                    let i = 32 * half + r;
-                    // `Slab::entry_exit`'s operations, with this
-                    // stream's planes.
-                    let (t0, t1) = slab_planes::<__m256>(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.far[i]);
-                    let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
-                    *m = _mm256_or_si256(*m, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << r)));
-                    near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));
-                }
-            }
-            // The children some ray entered, as bits.
-            let none = _mm256_cmpeq_epi32(_mm256_or_si256(masks[0], masks[1]), _mm256_setzero_si256());
-            let entered_children = !_mm256_movemask_ps(_mm256_castsi256_ps(none)) as u32 & 0xff;
-            if entered_children == 0 {
-                match stack.pop_where(&mut sp, |_, r| (r & active != 0).then_some(r)) {
-                    Some(e) => (code, entered) = e,
-                    None => return,
-                }
-                continue;
-            }
-            let mut child_rays = [[0u32; 8]; 2];
-            let mut child_near = [0.0f32; 8];
-            _mm256_storeu_si256(child_rays[0].as_mut_ptr() as *mut __m256i, masks[0]);
-            _mm256_storeu_si256(child_rays[1].as_mut_ptr() as *mut __m256i, masks[1]);
-            _mm256_storeu_ps(child_near.as_mut_ptr(), near);
-            // Start every entered child's fetch first: the leaves are
-            // tested right away, and their misses then overlap.
-            let mut b = entered_children;
-            while b != 0 {
-                let lane = b.trailing_zeros() as usize;
-                b &= b - 1;
-                self.prefetch(node.child[lane]);
-            }
+            let e = self.stream_enter(node, &planes, &s, entered & active);
             let mark = sp;
-            let mut b = entered_children;
+            let mut b = e.children;
             while b != 0 {
                 let lane = b.trailing_zeros() as usize;
                 b &= b - 1;
                 let child = node.child[lane];
-                let r = (child_rays[0][lane] as u64 | (child_rays[1][lane] as u64) << 32) & active;
+                let r = e.rays(lane) & active;
                 if r == 0 || child == EMPTY {
                     continue;
                 }
                 if child & LEAF_BIT == 0 {
-                    stack.push(&mut sp, child, child_near[lane], r);
+                    stack.push(&mut sp, child, e.near[lane], r);
                     continue;
                 }
                 // A leaf: the rays that entered it test its triangles.
