@@ -296,6 +296,17 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
+    /// `prefetch` of the one child a single ray enters next: only in trees
+    /// large enough to miss the caches (`Policy::prefetch`). Its node's
+    /// lines then arrive together, where the child row would be loaded only
+    /// once the box test has chosen a lane.
+    #[inline(always)]
+    fn prefetch_for_single(&self, code: u32) {
+        if self.policy.prefetch == PacketPrefetch::On {
+            self.prefetch(code);
+        }
+    }
+
     /// `prefetch` of the children of `node` in `mask`, for a packet about to
     /// enter them: only in trees large enough to miss the caches
     /// (`Policy::prefetch`).

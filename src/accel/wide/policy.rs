@@ -63,7 +63,7 @@ pub(super) enum ShadowBatches {
 }
 
 /// Whether packets prefetch the leaves (and masked packets the nodes) they
-/// are about to enter.
+/// are about to enter, and single rays the one child they enter alone.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum PacketPrefetch {
     Off,
@@ -94,9 +94,15 @@ pub(super) struct Policy {
 /// 22.0-22.4 / 6.0-6.1 against 23.3 / 5.9; on a 2-vCPU AMD EPYC within
 /// 2 % either way. But the 1M-triangle sphere (65 MiB) 18.1-18.7 / 3.5
 /// against 14.7 / 2.6 and subdivided bunny (121 MiB) 18.5-18.9 / 3.3-3.5
-/// against 16.8 / 3.1 need them. Single rays keep prefetching everywhere:
-/// on small trees it is worth 3-6 % of random rays on the EPYC and on the
-/// Xeon's maxplanck (CBbunny there: 3 % the other way).
+/// against 16.8 / 3.1 need them. Single rays keep prefetching the children
+/// they push everywhere: on small trees it is worth 3-6 % of random rays
+/// on the EPYC and on the Xeon's maxplanck (CBbunny there: 3 % the other
+/// way). The one child a single ray enters alone is prefetched only here:
+/// single rays, native ÷ Embree 4, 1 thread, six runs each on a Zen 3
+/// EPYC, without / with: sphere 5M random 0.70-0.90 / 0.87-1.01, diffuse
+/// 0.94-1.07 / 1.03-1.23; sphere 1M, grass 2M, arch 2M and the
+/// subdivided bunny within their spread; on cow (everywhere) the random
+/// batch lost up to a sixth.
 const PACKET_PREFETCH_BYTES: usize = 16 << 20;
 
 impl Policy {

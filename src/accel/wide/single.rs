@@ -63,6 +63,7 @@ impl<const W: usize> WideBvh<W> {
                     if mask & (mask - 1) == 0 {
                         // One child entered: no stack traffic.
                         cur = node.child[mask.trailing_zeros() as usize];
+                        self.prefetch_for_single(cur);
                         continue;
                     }
                     // Push every entered child (the one `order` visits
