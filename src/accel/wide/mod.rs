@@ -55,7 +55,7 @@ mod triangle;
 
 #[cfg(test)]
 use policy::avx_available;
-use policy::{ClosestBatches, PacketPrefetch, Policy};
+use policy::{ClosestBatches, EnteredPrefetch, Policy};
 pub use policy::simd_level;
 use stack::ChildOrder;
 pub use split_choice::SplitOutcome;
@@ -302,7 +302,7 @@ impl<const W: usize> WideBvh<W> {
     /// once the box test has chosen a lane.
     #[inline(always)]
     fn prefetch_for_single(&self, code: u32) {
-        if self.policy.prefetch == PacketPrefetch::On {
+        if self.policy.prefetch == EnteredPrefetch::On {
             self.prefetch(code);
         }
     }
@@ -312,7 +312,7 @@ impl<const W: usize> WideBvh<W> {
     /// (`Policy::prefetch`).
     #[inline(always)]
     fn prefetch_for_packet(&self, node: &Node<W>, mask: u32) {
-        if self.policy.prefetch == PacketPrefetch::Off {
+        if self.policy.prefetch == EnteredPrefetch::Off {
             return;
         }
         let mut m = mask;

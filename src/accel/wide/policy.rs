@@ -65,9 +65,9 @@ pub(super) enum ShadowBatches {
 /// Whether packets prefetch the leaves (and masked packets the nodes) they
 /// are about to enter, and single rays the one child they enter alone.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum PacketPrefetch {
+pub(super) enum EnteredPrefetch {
     Off,
-    /// Trees of at least `PACKET_PREFETCH_BYTES`.
+    /// Trees of at least `ENTERED_PREFETCH_BYTES`.
     On,
 }
 
@@ -78,7 +78,7 @@ pub(super) struct Policy {
     pub(super) packets: PacketIsa,
     pub(super) closest: ClosestBatches,
     pub(super) shadows: ShadowBatches,
-    pub(super) prefetch: PacketPrefetch,
+    pub(super) prefetch: EnteredPrefetch,
     /// The child order of any-hit traversals (`ChildOrder`), chosen from a
     /// sample of shadow-like rays over the tree's own triangles
     /// (`single::any_order_of`).
@@ -103,7 +103,7 @@ pub(super) struct Policy {
 /// 0.94-1.07 / 1.03-1.23; sphere 1M, grass 2M, arch 2M and the
 /// subdivided bunny within their spread; on cow (everywhere) the random
 /// batch lost up to a sixth.
-const PACKET_PREFETCH_BYTES: usize = 16 << 20;
+const ENTERED_PREFETCH_BYTES: usize = 16 << 20;
 
 impl Policy {
     /// What a tree holds while its policy is being chosen: the scalar
@@ -113,7 +113,7 @@ impl Policy {
         packets: PacketIsa::Avx2,
         closest: ClosestBatches::Single,
         shadows: ShadowBatches::Packets,
-        prefetch: PacketPrefetch::Off,
+        prefetch: EnteredPrefetch::Off,
         any_order: ChildOrder::FarthestFirst,
     };
 
@@ -152,7 +152,7 @@ impl Policy {
             packets,
             closest,
             shadows: if stream_shadows { ShadowBatches::Streams } else { ShadowBatches::Packets },
-            prefetch: if tree.memory_bytes() >= PACKET_PREFETCH_BYTES { PacketPrefetch::On } else { PacketPrefetch::Off },
+            prefetch: if tree.memory_bytes() >= ENTERED_PREFETCH_BYTES { EnteredPrefetch::On } else { EnteredPrefetch::Off },
             any_order: tree.any_order_of(prims),
         }
     }
