@@ -240,6 +240,53 @@ fn depth_and_object_id_images_describe_the_first_hit() {
     assert!(checked > 100, "only {checked} back-wall pixels");
 }
 
+/// `bench --resume DIR`: a run cut short leaves its finished parts in DIR;
+/// the next run of the same binary and options takes them (its rows are the
+/// first run's, to the last digit) and measures only the rest; other
+/// options, or a damaged file, are measured again, saying why.
+#[test]
+fn bench_resume_takes_the_parts_a_cut_run_kept() {
+    let d = scratch("bench-resume");
+    let cow = common::scene_path("meshedit", "cow");
+    let cow = cow.to_str().unwrap();
+    let opts = ["bench", "--rays", "2048", "--no-render", "--no-peers", "--backends", "native,brute", "--resume", "kept"];
+    let bench = |scenes: &[&str], more: &[&str], csv: &str| {
+        let out = run(&d, &[&opts[..], scenes, more, &["--csv", csv]].concat());
+        let rows: Vec<String> = std::fs::read_to_string(d.join(csv)).unwrap().lines().skip(1).map(str::to_string).collect();
+        (String::from_utf8_lossy(&out.stderr).into_owned(), rows)
+    };
+    let of = |rows: &[String], scene: &str| -> Vec<String> { rows.iter().filter(|r| r.starts_with(&format!("{scene},"))).cloned().collect() };
+
+    // Cut short after cow: its part is kept.
+    let (err, first) = bench(&[cow], &[], "a.csv");
+    assert!(!err.contains("taken from"), "{err}");
+    assert_eq!(std::fs::read_dir(d.join("kept")).unwrap().count(), 1);
+    let cow_rows = of(&first, "cow");
+    assert_eq!(cow_rows.len(), 6 * 2 * if std::thread::available_parallelism().map_or(1, |n| n.get()) > 1 { 2 } else { 1 }, "{first:?}");
+
+    // Run again with the rest: cow taken, to the last digit; the sphere measured.
+    let (err, second) = bench(&[cow, "sphere:2000"], &[], "b.csv");
+    assert!(err.contains(&format!("bench: {cow}: measured by an earlier run, taken from kept")), "{err}");
+    assert_eq!(of(&second, "cow"), cow_rows);
+    assert_eq!(of(&second, "sphere_2000").len(), cow_rows.len(), "{second:?}");
+
+    // Other options: measured again (throughputs never repeat to four decimals).
+    let (err, third) = bench(&[cow], &["--passes", "2"], "c.csv");
+    assert!(err.contains("measured by another build, machine or options; measuring"), "{err}");
+    assert_ne!(of(&third, "cow"), cow_rows);
+
+    // A damaged part: measured again, not trusted, and kept anew.
+    for f in std::fs::read_dir(d.join("kept")).unwrap() {
+        let f = f.unwrap().path();
+        let text = std::fs::read_to_string(&f).unwrap();
+        std::fs::write(&f, &text[..text.len() / 2]).unwrap();
+    }
+    let (err, _) = bench(&[cow], &["--passes", "2"], "d.csv");
+    assert!(err.contains("damaged"), "{err}");
+    let (err, _) = bench(&[cow], &["--passes", "2"], "e.csv");
+    assert!(err.contains("taken from kept"), "{err}");
+}
+
 /// `pathtracer bench` writes the CSV and Markdown the documentation's tables
 /// are generated from: one CSV row per scene, ray kind, thread count and backend, and the
 /// native ÷ Embree and SAH tables when Embree is built in. Checks the shape

@@ -324,7 +324,9 @@ fn small(args: &[String]) -> Vec<String> {
             } else {
                 a.extend(["--threads".into(), "1".into()]);
             }
-            if !a.iter().skip(1).any(|x| !x.starts_with('-') && x != "1") {
+            // A scene is a word that is neither a flag nor a flag's value.
+            let takes_value = ["--backends", "--rays", "--passes", "--threads", "--csv", "--markdown", "--resume"];
+            if !a.iter().enumerate().skip(1).any(|(i, x)| !x.starts_with('-') && !takes_value.contains(&a[i - 1].as_str())) {
                 a.push("cow".into());
             }
             a.extend(["--rays".into(), "8192".into(), "--passes".into(), "1".into()]);

@@ -17,6 +17,7 @@ use glam::Vec3;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+mod resume;
 mod run;
 mod tables;
 mod timing;
@@ -73,6 +74,12 @@ pub struct BenchArgs {
     /// Also write the printed tables as Markdown
     #[arg(long, value_name = "FILE")]
     pub markdown: Option<PathBuf>,
+    /// Keep each finished part of the run (a scene's tables, a scene's
+    /// path-traced renders) in DIR, and take the parts an earlier run of
+    /// this same binary, machine and options kept there instead of
+    /// measuring them again: a run cut short starts again where it stopped
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
 }
 
 /// The default bench scenes: the CS184 scans, the easy procedural sphere and

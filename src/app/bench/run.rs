@@ -3,6 +3,7 @@
 
 use super::tables::{best_call_table, ratio_table, scaling_table, Sample};
 use super::timing::{labels, throughput, throughputs, RaySet, TIMED};
+use super::resume::{exact, parse_exact, Checkpoints};
 use super::{cpu_model, embree_sah, load_bench_scene, path_render_rows, peers, seed_timing, thread_counts, BenchArgs, Contender};
 use super::{BRUTE_LIMIT, BUILD_REPS, DEFAULT_SCENES, RENDER_SCENES};
 use crate::accel::workloads::{camera_rays, diffuse_rays, random_rays, shadow_rays, tile_order};
@@ -12,6 +13,7 @@ use crate::error::Result;
 use crate::ray::Ray;
 use crate::render::{self, normals::NormalShading, RenderSettings};
 use crate::scene::Scene;
+use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::fmt::Write as _;
 
@@ -64,9 +66,26 @@ impl Plan {
         let expected_rays = (args.rays * TIMED.len() * (args.passes + 1) * thread_counts.len()) as u64;
         Ok(Plan { all, thread_counts, backends, contenders, majors, expected_rays })
     }
+
+    /// Everything that changes what a part measures, for `--resume`'s key.
+    fn describe(&self, args: &BenchArgs) -> String {
+        let contenders: Vec<String> = self.contenders.iter().map(|c| c.to_string()).collect();
+        format!(
+            "{}, {} threads; rays {}, passes {}, threads {:?}, contenders [{}], throughput-only {}, no-render {}",
+            cpu_model(),
+            self.all,
+            args.rays,
+            args.passes,
+            self.thread_counts,
+            contenders.join(" "),
+            args.throughput_only,
+            args.no_render
+        )
+    }
 }
 
-/// What the run's scenes fill in, scene by scene.
+/// What the run's scenes fill in, scene by scene: each scene's part, then
+/// the run's (`append`).
 #[derive(Default)]
 struct Tables {
     /// The throughput table's rows.
@@ -78,6 +97,76 @@ struct Tables {
     embree_best: Vec<(String, &'static str, Contender, f64)>,
     /// Normal shading with and without the BVH.
     normals: String,
+    /// The path-traced renders' rows.
+    renders: String,
+}
+
+impl Tables {
+    fn append(&mut self, part: Tables) {
+        self.throughput.push_str(&part.throughput);
+        self.samples.extend(part.samples);
+        self.sah.push_str(&part.sah);
+        self.modes.push_str(&part.modes);
+        self.embree_best.extend(part.embree_best);
+        self.normals.push_str(&part.normals);
+        self.renders.push_str(&part.renders);
+    }
+
+    /// Every field, the measurements exactly (`resume::exact`).
+    fn to_json(&self) -> Value {
+        json!({
+            "throughput": self.throughput,
+            "samples": self.samples.iter().map(|s| json!([s.scene, s.rays, s.threads, s.backend.to_string(), exact(s.mrays_per_s)])).collect::<Vec<_>>(),
+            "sah": self.sah,
+            "modes": self.modes,
+            "embree_best": self.embree_best.iter().map(|(scene, rays, c, m)| json!([scene, rays, c.to_string(), exact(*m)])).collect::<Vec<_>>(),
+            "normals": self.normals,
+            "renders": self.renders,
+        })
+    }
+
+    /// What `to_json` wrote, its ray kinds and contenders this plan's;
+    /// `None` where anything is missing or unknown.
+    fn from_json(v: &Value, plan: &Plan) -> Option<Tables> {
+        let text = |k: &str| v[k].as_str().map(str::to_string);
+        let rays = |v: &Value| labels().find(|l| v.as_str() == Some(*l));
+        let contender = |v: &Value| plan.contenders.iter().copied().find(|c| v.as_str() == Some(c.to_string().as_str()));
+        let mut samples = Vec::new();
+        for s in v["samples"].as_array()? {
+            let threads = usize::try_from(s[2].as_u64()?).ok()?;
+            samples.push(Sample { scene: s[0].as_str()?.to_string(), rays: rays(&s[1])?, threads, backend: contender(&s[3])?, mrays_per_s: parse_exact(&s[4])? });
+        }
+        let mut embree_best = Vec::new();
+        for b in v["embree_best"].as_array()? {
+            embree_best.push((b[0].as_str()?.to_string(), rays(&b[1])?, contender(&b[2])?, parse_exact(&b[3])?));
+        }
+        Some(Tables {
+            throughput: text("throughput")?,
+            samples,
+            sah: text("sah")?,
+            modes: text("modes")?,
+            embree_best,
+            normals: text("normals")?,
+            renders: text("renders")?,
+        })
+    }
+}
+
+/// A part of the run: taken from `--resume`'s folder where an earlier run
+/// of the same binary, machine and options left it, else measured (and
+/// kept there).
+fn part(store: Option<&Checkpoints>, plan: &Plan, name: &str, measure: impl FnOnce() -> Result<Tables>) -> Result<Tables> {
+    let Some(store) = store else { return measure() };
+    if let Some(kept) = store.load(name) {
+        if let Some(t) = Tables::from_json(&kept, plan) {
+            eprintln!("bench: {name}: measured by an earlier run, taken from {}", store.dir().display());
+            return Ok(t);
+        }
+        eprintln!("bench: {name}: the kept part in {} is incomplete; measuring it again", store.dir().display());
+    }
+    let t = measure()?;
+    store.save(name, t.to_json())?;
+    Ok(t)
 }
 
 /// One scene's ray sets, each repeated up to `--rays`.
@@ -117,11 +206,25 @@ impl RaySets {
 pub fn run(args: &BenchArgs) -> Result<()> {
     let plan = Plan::new(args)?;
     let names: Vec<String> = if args.scenes.is_empty() { DEFAULT_SCENES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
+    let store = match &args.resume {
+        Some(dir) => Some(Checkpoints::open(dir, &plan.describe(args))?),
+        None => None,
+    };
     let mut t = Tables::default();
     for name in &names {
-        bench_scene(args, &plan, name, &mut t)?;
+        t.append(part(store.as_ref(), &plan, name, || {
+            let mut p = Tables::default();
+            bench_scene(args, &plan, name, &mut p)?;
+            Ok(p)
+        })?);
     }
-    let md = report(args, &plan, &t)?;
+    if !(args.no_render || args.throughput_only) {
+        let backends: Vec<BackendKind> = plan.backends.iter().copied().filter(|b| *b != BackendKind::Brute).collect();
+        for name in RENDER_SCENES {
+            t.append(part(store.as_ref(), &plan, &format!("render {name}"), || Ok(Tables { renders: path_render_rows(name, &backends, plan.all)?, ..Tables::default() }))?);
+        }
+    }
+    let md = report(args, &plan, &t);
     print!("{md}");
     if let Some(p) = &args.markdown {
         crate::image_io::write_text(p, &md)?;
@@ -283,7 +386,7 @@ fn normal_shading_row(scene: &Scene, camera: &Camera, all: usize) -> Result<Stri
 
 /// The printed tables: throughput, then what is read off it, then the
 /// renders.
-fn report(args: &BenchArgs, plan: &Plan, t: &Tables) -> Result<String> {
+fn report(args: &BenchArgs, plan: &Plan, t: &Tables) -> String {
     let all = plan.all;
     let mut md = String::new();
     let threads_said = plan.thread_counts.iter().map(|t| t.to_string()).collect::<Vec<_>>().join(", ");
@@ -330,7 +433,6 @@ fn report(args: &BenchArgs, plan: &Plan, t: &Tables) -> Result<String> {
         md.push_str(&t.normals);
     }
     if !(args.no_render || args.throughput_only) {
-        let backends: Vec<BackendKind> = plan.backends.iter().copied().filter(|b| *b != BackendKind::Brute).collect();
         let _ = writeln!(
             md,
             "\nPath-traced render, 480x360 (CS184 crop), 64 spp, -m 5, seed 1, {all} threads: rays traced in batches (the renderer's \
@@ -339,11 +441,9 @@ fn report(args: &BenchArgs, plan: &Plan, t: &Tables) -> Result<String> {
         );
         let _ = writeln!(md, "| scene | backend | rays traced | render s | rays | Mrays/s | image |");
         let _ = writeln!(md, "|---|---|---|---:|---:|---:|---|");
-        for name in RENDER_SCENES {
-            md.push_str(&path_render_rows(name, &backends, all)?);
-        }
+        md.push_str(&t.renders);
     }
-    Ok(md)
+    md
 }
 
 /// Each Embree's batch calls, and native against each Embree's fastest.
