@@ -47,8 +47,9 @@ impl Checkpoints {
     /// the whole name so that two names never share a file.
     fn path(&self, part: &str) -> PathBuf {
         let safe: String = part.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '.' { c } else { '_' }).collect();
-        let safe: String = safe.chars().rev().take(60).collect::<Vec<_>>().into_iter().rev().collect();
-        self.dir.join(format!("{safe}-{:08x}.json", xxh3_128(part.as_bytes()) as u32))
+        // The name's end (ASCII now, so any byte is a boundary).
+        let tail = &safe[safe.len().saturating_sub(60)..];
+        self.dir.join(format!("{tail}-{:08x}.json", xxh3_128(part.as_bytes()) as u32))
     }
 
     /// The kept measurements of `part`, where a file holds them under this
