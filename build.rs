@@ -145,15 +145,20 @@ const BINARY_INPUTS: [&str; 6] = ["src", "native", "build.rs", "Cargo.toml", "Ca
 fn git_commit() -> String {
     let root = PathBuf::from(env::var("CARGO_MANIFEST_DIR").unwrap());
     let git = |args: &[&str]| Command::new("git").arg("-C").arg(&root).args(args).output().ok().filter(|o| o.status.success()).map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
-    let (Some(commit), Some(git_dir)) = (git(&["rev-parse", "--short=12", "HEAD"]), git(&["rev-parse", "--absolute-git-dir"])) else {
+    let (Some(commit), Some(git_dir), Some(common_dir)) =
+        (git(&["rev-parse", "--short=12", "HEAD"]), git(&["rev-parse", "--absolute-git-dir"]), git(&["rev-parse", "--path-format=absolute", "--git-common-dir"]))
+    else {
         return "built outside git".into();
     };
-    let git_dir = PathBuf::from(git_dir);
-    for f in ["HEAD", "index", "packed-refs"] {
-        println!("cargo:rerun-if-changed={}", git_dir.join(f).display());
-    }
-    if let Some(head_ref) = git(&["symbolic-ref", "-q", "HEAD"]) {
-        println!("cargo:rerun-if-changed={}", git_dir.join(head_ref).display());
+    // HEAD and the index are the checkout's own (a worktree's are under
+    // .git/worktrees/NAME); the refs are the repository's. Only files that
+    // exist are watched: cargo takes a missing one as changed and would run
+    // this script, and compile the crate, on every build. The folder of
+    // branch refs catches a branch's first loose ref beside packed-refs.
+    let (git_dir, common_dir) = (PathBuf::from(git_dir), PathBuf::from(common_dir));
+    let watched = [git_dir.join("HEAD"), git_dir.join("index"), common_dir.join("packed-refs"), common_dir.join("refs/heads")];
+    for f in watched.iter().filter(|f| f.exists()) {
+        println!("cargo:rerun-if-changed={}", f.display());
     }
     for input in BINARY_INPUTS {
         println!("cargo:rerun-if-changed={input}");
