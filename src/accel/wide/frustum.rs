@@ -328,7 +328,7 @@ impl<const W: usize> WideBvh<W> {
             }
             if mask & leaves != 0 {
                 // Start fetching the leaves while the rays test the node.
-                self.prefetch_for_packet(node, mask & leaves);
+                self.prefetch_entered(node, mask & leaves);
                 // Leaf by leaf, the rays that enter it (tested 8 at a time,
                 // the single-ray slab test's operations lane by lane).
                 let mut todo = mask & leaves;

@@ -104,7 +104,7 @@ impl<const W: usize> WideBvh<W> {
                     continue;
                 }
                 if child & LEAF_BIT == 0 {
-                    self.prefetch_for_packet(node, 1 << lane);
+                    self.prefetch_entered(node, 1 << lane);
                     stack.push(&mut sp, child, child_near[lane], r);
                     continue;
                 }

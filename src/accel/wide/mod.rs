@@ -296,22 +296,13 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    /// `prefetch` of the one child a single ray enters next: only in trees
-    /// large enough to miss the caches (`Policy::prefetch`). Its node's
-    /// lines then arrive together, where the child row would be loaded only
-    /// once the box test has chosen a lane.
+    /// `prefetch` of the children of `node` in `mask`, about to be entered
+    /// (by a packet or stream, or by a single ray that enters one child
+    /// alone): only in trees large enough to miss the caches
+    /// (`Policy::prefetch`). The children's lines then arrive together,
+    /// where each row would otherwise be loaded only once a box test needs it.
     #[inline(always)]
-    fn prefetch_for_single(&self, code: u32) {
-        if self.policy.prefetch == EnteredPrefetch::On {
-            self.prefetch(code);
-        }
-    }
-
-    /// `prefetch` of the children of `node` in `mask`, for a packet about to
-    /// enter them: only in trees large enough to miss the caches
-    /// (`Policy::prefetch`).
-    #[inline(always)]
-    fn prefetch_for_packet(&self, node: &Node<W>, mask: u32) {
+    fn prefetch_entered(&self, node: &Node<W>, mask: u32) {
         if self.policy.prefetch == EnteredPrefetch::Off {
             return;
         }
@@ -395,7 +386,7 @@ impl<const W: usize> Traversal for WideBvh<W> {
                     ClosestBatches::Streams => self.closest_streams(rays, hits),
                     ClosestBatches::StreamsWhereCoherent | ClosestBatches::StreamsElseInterleaved if self.streams_pay(rays) => self.closest_streams(rays, hits),
                     ClosestBatches::Interleaved | ClosestBatches::StreamsElseInterleaved => self.closest_interleaved_avx(rays, hits),
-                    ClosestBatches::Single | ClosestBatches::StreamsWhereCoherent => self.closest_all_avx(rays, hits),
+                    ClosestBatches::Single | ClosestBatches::StreamsWhereCoherent => self.closest_batch_avx(rays, hits),
                 }
             };
         }

@@ -419,17 +419,12 @@ impl RaysSoA {
     /// `Shear::new` make them.
     #[inline(always)]
     pub(super) fn shear(&self, i: usize) -> (RayTransform, Shear) {
-        let kz = if self.kz0 >> i & 1 != 0 {
-            0
-        } else if self.kz1 >> i & 1 != 0 {
-            1
-        } else {
-            2
-        };
-        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-        if self.swap >> i & 1 != 0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        // By arithmetic and a table, not branches: the axes of incoherent
+        // rays are unpredictable. `kz1` is set only where `kz0` is not.
+        const AFTER: [[usize; 2]; 3] = [[1, 2], [2, 0], [0, 1]];
+        let (x, y, swap) = ((self.kz0 >> i & 1) as usize, (self.kz1 >> i & 1) as usize, (self.swap >> i & 1) as usize);
+        let kz = 2 - 2 * x - y;
+        let (kx, ky) = (AFTER[kz][swap], AFTER[kz][1 - swap]);
         let o = [self.o[0][i], self.o[1][i], self.o[2][i]];
         let s = [self.s[0][i], self.s[1][i], self.s[2][i]];
         let rt = RayTransform::from_shear(glam::Vec3::from_array(o), [kx, ky, kz], s);
@@ -442,7 +437,8 @@ impl RaysSoA {
         Slab {
             o: [self.o[0][i], self.o[1][i], self.o[2][i]],
             inv: [self.inv[0][i], self.inv[1][i], self.inv[2][i]],
-            near_plane: [0, 1, 2].map(|a| if self.neg[a] >> i & 1 != 0 { 3 + a } else { a }),
+            // Spelled out, by arithmetic: see `new_with` on closures.
+            near_plane: [3 * (self.neg[0] >> i & 1) as usize, 1 + 3 * (self.neg[1] >> i & 1) as usize, 2 + 3 * (self.neg[2] >> i & 1) as usize],
         }
     }
 

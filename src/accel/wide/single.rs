@@ -5,6 +5,8 @@
 //! the scene's triangles (`any_order_of`).
 
 use super::kernels::Slab;
+#[cfg(target_arch = "x86_64")]
+use super::packet::{RaysSoA, PACKET};
 use super::triangle::Shear;
 use super::stack::{ChildOrder, WalkStack};
 use super::{WideBvh, EMPTY, LEAF_BIT};
@@ -31,13 +33,22 @@ impl<const W: usize> WideBvh<W> {
     /// stop. `AVX` selects the AVX2 box test, which the caller must have
     /// checked the CPU has (`self.policy.avx()`) and compiled for (`#[target_feature]`).
     #[inline(always)]
-    fn walk<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32, mut visit: F) {
+    fn walk<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, order: ChildOrder, work: &mut u32, visit: F) {
         if self.tree.root == EMPTY {
             return;
         }
         let rt = RayTransform::new(ray.origin, ray.dir);
         let shear = Shear::new(&rt);
         let slab = Slab::new(ray);
+        self.walk_set_up::<AVX, ANY, F>(ray, &rt, &shear, &slab, order, work, visit)
+    }
+
+    /// `walk` of a ray whose constants are already made (`RayTransform`,
+    /// `Shear`, `Slab`: as their `new` makes them, or as the packet set-up
+    /// makes them for 16 rays at once); the tree is not empty.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn walk_set_up<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, rt: &RayTransform, shear: &Shear, slab: &Slab, order: ChildOrder, work: &mut u32, mut visit: F) {
         let mut tmax = ray.tmax;
         let mut stack = WalkStack::<()>::new();
         let mut sp = 0;
@@ -47,7 +58,7 @@ impl<const W: usize> WideBvh<W> {
                 let leaf = self.leaf_of(cur);
                 *work += leaf.n_groups + leaf.n_spheres;
                 let mut stop = false;
-                self.leaf(&leaf, ray, &rt, &shear, tmax, &mut |h| {
+                self.leaf(&leaf, ray, rt, shear, tmax, &mut |h| {
                     stop = visit(h, &mut tmax);
                     stop
                 });
@@ -62,8 +73,8 @@ impl<const W: usize> WideBvh<W> {
                 if mask != 0 {
                     if mask & (mask - 1) == 0 {
                         // One child entered: no stack traffic.
+                        self.prefetch_entered(node, mask);
                         cur = node.child[mask.trailing_zeros() as usize];
-                        self.prefetch_for_single(cur);
                         continue;
                     }
                     // Push every entered child (the one `order` visits
@@ -89,8 +100,18 @@ impl<const W: usize> WideBvh<W> {
     /// `closest`, adding the nodes and leaf groups it visits to `work`.
     #[inline(always)]
     pub(super) fn closest_counted<const AVX: bool>(&self, ray: &Ray, work: &mut u32) -> Option<Hit> {
+        if self.tree.root == EMPTY {
+            return None;
+        }
+        let rt = RayTransform::new(ray.origin, ray.dir);
+        self.closest_set_up::<AVX>(ray, &rt, &Shear::new(&rt), &Slab::new(ray), work)
+    }
+
+    /// `closest_counted` of a ray whose constants are made (`walk_set_up`).
+    #[inline(always)]
+    fn closest_set_up<const AVX: bool>(&self, ray: &Ray, rt: &RayTransform, shear: &Shear, slab: &Slab, work: &mut u32) -> Option<Hit> {
         let mut best: Option<Hit> = None;
-        self.walk::<AVX, false, _>(ray, ChildOrder::NearestFirst, work, |h, tmax| {
+        self.walk_set_up::<AVX, false, _>(ray, rt, shear, slab, ChildOrder::NearestFirst, work, |h, tmax| {
             if closer(h, &best) {
                 *tmax = h.t;
                 best = Some(h);
@@ -98,6 +119,32 @@ impl<const W: usize> WideBvh<W> {
             false
         });
         best
+    }
+
+    /// `closest_all` of a batch whose rays are set up 16 at a time in one
+    /// AVX2 pass (`RaysSoA`: the same constants, bit for bit, as each ray's
+    /// own set-up), then walked one at a time.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest_batch_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        if self.tree.root == EMPTY {
+            hits.fill(None);
+            return;
+        }
+        for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            let soa = RaysSoA::new_with::<false>(r);
+            for (i, (ray, hit)) in r.iter().zip(h.iter_mut()).enumerate() {
+                *hit = if soa.valid >> i & 1 == 0 {
+                    None
+                } else {
+                    let (rt, shear) = soa.shear(i);
+                    self.closest_set_up::<true>(ray, &rt, &shear, &soa.slab(i), &mut 0)
+                };
+            }
+        }
     }
 
     #[inline(always)]

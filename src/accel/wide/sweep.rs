@@ -308,7 +308,7 @@ impl<const W: usize> WideBvh<W> {
                 }
             }
             let mut todo = mask & leaves;
-            self.prefetch_for_packet(node, todo);
+            self.prefetch_entered(node, todo);
             while todo != 0 {
                 let lane = todo.trailing_zeros() as usize;
                 todo &= todo - 1;
