@@ -243,12 +243,15 @@ fn depth_and_object_id_images_describe_the_first_hit() {
 /// `bench --resume DIR`: a run cut short leaves its finished parts in DIR;
 /// the next run of the same binary and options takes them (its rows are the
 /// first run's, to the last digit) and measures only the rest; other
-/// options, or a damaged file, are measured again, saying why.
+/// options, an edited scene file, or a damaged file, are measured again,
+/// saying why.
 #[test]
 fn bench_resume_takes_the_parts_a_cut_run_kept() {
     let d = scratch("bench-resume");
-    let cow = common::scene_path("meshedit", "cow");
-    let cow = cow.to_str().unwrap();
+    // A copy of cow, to edit later.
+    let cow_file = d.join("cow.dae");
+    std::fs::copy(common::scene_path("meshedit", "cow"), &cow_file).unwrap();
+    let cow = cow_file.to_str().unwrap();
     let opts = ["bench", "--rays", "2048", "--no-render", "--no-peers", "--backends", "native,brute", "--resume", "kept"];
     let bench = |scenes: &[&str], more: &[&str], csv: &str| {
         let out = run(&d, &[&opts[..], scenes, more, &["--csv", csv]].concat());
@@ -272,8 +275,17 @@ fn bench_resume_takes_the_parts_a_cut_run_kept() {
 
     // Other options: measured again (throughputs never repeat to four decimals).
     let (err, third) = bench(&[cow], &["--passes", "2"], "c.csv");
-    assert!(err.contains("measured by another build, machine or options; measuring"), "{err}");
+    assert!(err.contains("measured by another build, machine or options, or from other scene files; measuring"), "{err}");
     assert_ne!(of(&third, "cow"), cow_rows);
+    let (err, _) = bench(&[cow], &["--passes", "2"], "c2.csv");
+    assert!(err.contains("taken from kept"), "{err}");
+
+    // The scene file edited (a comment after its root element): measured again.
+    let mut text = std::fs::read_to_string(&cow_file).unwrap();
+    text.push_str("<!-- edited -->\n");
+    std::fs::write(&cow_file, text).unwrap();
+    let (err, _) = bench(&[cow], &["--passes", "2"], "c3.csv");
+    assert!(err.contains("from other scene files; measuring"), "{err}");
 
     // A damaged part: measured again, not trusted, and kept anew.
     for f in std::fs::read_dir(d.join("kept")).unwrap() {

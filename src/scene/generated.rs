@@ -41,6 +41,18 @@ pub type FindScene<'a> = &'a dyn Fn(&str) -> Result<PathBuf>;
 /// The kinds, for `--help` and error messages.
 pub const KINDS: &str = "sphere:N, arch:N, grass:N, stadium:N, subdiv:NAME:N";
 
+/// The scene names a generator spec reads (`subdiv:NAME:N` reads `NAME`,
+/// the other generators nothing), or `None` when `spec` is not a
+/// generator's (a file name).
+pub fn inputs(spec: &str) -> Option<Vec<&str>> {
+    let (kind, rest) = spec.split_once(':')?;
+    match kind {
+        "sphere" | "arch" | "grass" | "stadium" => Some(Vec::new()),
+        "subdiv" => Some(rest.rsplit_once(':').map(|(name, _)| name).into_iter().collect()),
+        _ => None,
+    }
+}
+
 /// A generator spec's scene, or `None` when `spec` is not one (a file name);
 /// `find` resolves the scene names `subdiv:NAME:N` refines.
 pub fn generate(spec: &str, find: FindScene) -> Option<Result<Scene>> {
@@ -429,6 +441,15 @@ mod tests {
 
     fn scene(spec: &str) -> Scene {
         for_tests(spec)
+    }
+
+    #[test]
+    fn inputs_name_what_a_generator_reads() {
+        assert_eq!(inputs("subdiv:bunny:1.5M"), Some(vec!["bunny"]));
+        assert_eq!(inputs("subdiv:dir/a:b.dae:2M"), Some(vec!["dir/a:b.dae"]));
+        assert_eq!(inputs("arch:2M"), Some(vec![]));
+        assert_eq!(inputs("CBbunny"), None);
+        assert_eq!(inputs("C:scene.dae"), None);
     }
 
     #[test]

@@ -76,8 +76,9 @@ pub struct BenchArgs {
     pub markdown: Option<PathBuf>,
     /// Keep each finished part of the run (a scene's tables, a scene's
     /// path-traced renders) in DIR, and take the parts an earlier run of
-    /// this same binary, machine and options kept there instead of
-    /// measuring them again: a run cut short starts again where it stopped
+    /// this same binary, machine and options kept there, from the same
+    /// scene files, instead of measuring them again: a run cut short starts
+    /// again where it stopped
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
 }
@@ -135,6 +136,17 @@ pub fn load_bench_scene(name: &str) -> Result<Scene> {
         }
     }
     crate::scene::load_file(&find_scene(name)?)
+}
+
+/// The files the scene `name` is read from (the file it names or finds, the
+/// scene a generator refines; none for a generator that reads nothing), for
+/// `--resume` to tell an edited scene from the one a kept part measured.
+pub fn scene_files(name: &str) -> Vec<PathBuf> {
+    let names = match generated::inputs(name) {
+        Some(names) if !Path::new(name).exists() => names,
+        _ => vec![name],
+    };
+    names.into_iter().filter_map(|n| find_scene(n).ok()).collect()
 }
 
 /// The CPU's model name and the SIMD extensions the backends can use, so a

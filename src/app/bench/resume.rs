@@ -7,8 +7,9 @@
 //!
 //! A kept part is used only where its key equals the run's: the XXH3-128 of
 //! the executable's bytes (any rebuild measures again), the CPU and thread
-//! count, every option that changes what is timed, and the `PATHTRACER_*`
-//! environment (Embree configuration, build options). Otherwise, or where
+//! count, every option that changes what is timed, the `PATHTRACER_*`
+//! environment (Embree configuration, build options), and the XXH3-128 of
+//! the part's scene files (an edited scene measures again). Otherwise, or where
 //! the file is damaged, the part is measured again and the reason printed.
 //! Measurements are stored exactly (`f64` in Rust's shortest round-trip
 //! form), so tables printed from kept parts are the tables the first run
@@ -52,10 +53,23 @@ impl Checkpoints {
         self.dir.join(format!("{tail}-{:08x}.json", xxh3_128(part.as_bytes()) as u32))
     }
 
-    /// The kept measurements of `part`, where a file holds them under this
-    /// run's key; `None` (saying why on stderr when a file was there) where
-    /// they must be measured.
-    pub(super) fn load(&self, part: &str) -> Option<Value> {
+    /// The key of a part read from `files`: the run's, and each file's
+    /// bytes.
+    fn part_key(&self, files: &[PathBuf]) -> String {
+        let hashes: Vec<String> = files
+            .iter()
+            .map(|f| match std::fs::read(f) {
+                Ok(bytes) => format!("{} xxh3-128 {:032x}", f.display(), xxh3_128(&bytes)),
+                Err(e) => format!("{} unreadable ({e})", f.display()),
+            })
+            .collect();
+        format!("{}; scene files [{}]", self.key, hashes.join(", "))
+    }
+
+    /// The kept measurements of `part` (read from the scene `files`), where
+    /// a file holds them under this run's key; `None` (saying why on stderr
+    /// when a file was there) where they must be measured.
+    pub(super) fn load(&self, part: &str, files: &[PathBuf]) -> Option<Value> {
         let path = self.path(part);
         let text = match std::fs::read_to_string(&path) {
             Ok(t) => t,
@@ -76,16 +90,17 @@ impl Checkpoints {
             eprintln!("bench: {}: not a kept part of {part}; measuring it again", path.display());
             return None;
         }
-        if doc["key"] != self.key.as_str() {
-            eprintln!("bench: {}: measured by another build, machine or options; measuring {part} again", path.display());
+        if doc["key"] != self.part_key(files).as_str() {
+            eprintln!("bench: {}: measured by another build, machine or options, or from other scene files; measuring {part} again", path.display());
             return None;
         }
         Some(doc["measured"].clone())
     }
 
-    /// Keep `measured` as `part`'s (written whole or not at all).
-    pub(super) fn save(&self, part: &str, measured: Value) -> Result<()> {
-        let doc = serde_json::json!({ "format": FORMAT, "part": part, "key": self.key, "measured": measured });
+    /// Keep `measured` as `part`'s, read from the scene `files` (written
+    /// whole or not at all).
+    pub(super) fn save(&self, part: &str, files: &[PathBuf], measured: Value) -> Result<()> {
+        let doc = serde_json::json!({ "format": FORMAT, "part": part, "key": self.part_key(files), "measured": measured });
         let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::new(format!("bench: {part}: {e}")))?;
         crate::image_io::write_text(&self.path(part), &text)
     }
@@ -127,15 +142,22 @@ mod tests {
     fn a_part_is_kept_only_under_its_own_key() {
         let d = scratch("key");
         let a = Checkpoints::open(&d, "rays 16").unwrap();
-        assert!(a.load("sphere:1M").is_none());
-        a.save("sphere:1M", serde_json::json!({ "x": exact(2.5) })).unwrap();
-        assert_eq!(parse_exact(&a.load("sphere:1M").unwrap()["x"]), Some(2.5));
+        assert!(a.load("sphere:1M", &[]).is_none());
+        a.save("sphere:1M", &[], serde_json::json!({ "x": exact(2.5) })).unwrap();
+        assert_eq!(parse_exact(&a.load("sphere:1M", &[]).unwrap()["x"]), Some(2.5));
         // Another part, other options: nothing to take.
-        assert!(a.load("sphere:5M").is_none());
-        assert!(Checkpoints::open(&d, "rays 32").unwrap().load("sphere:1M").is_none());
+        assert!(a.load("sphere:5M", &[]).is_none());
+        assert!(Checkpoints::open(&d, "rays 32").unwrap().load("sphere:1M", &[]).is_none());
+        // A scene file edited after its part was kept: measured again.
+        let scene = d.join("scene.obj");
+        std::fs::write(&scene, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        a.save("scene.obj", &[scene.clone()], serde_json::json!({ "x": exact(1.5) })).unwrap();
+        assert!(a.load("scene.obj", &[scene.clone()]).is_some());
+        std::fs::write(&scene, "v 0 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        assert!(a.load("scene.obj", &[scene.clone()]).is_none());
         // A damaged file is measured again, not trusted.
         std::fs::write(a.path("sphere:1M"), "{\"format\": \"pathtracer-bench-part 1\", \"par").unwrap();
-        assert!(a.load("sphere:1M").is_none());
+        assert!(a.load("sphere:1M", &[]).is_none());
         // Names that differ only in characters a file name cannot hold.
         assert_ne!(a.path("a/b"), a.path("a:b"));
         let _ = std::fs::remove_dir_all(&d);

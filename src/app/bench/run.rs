@@ -152,12 +152,13 @@ impl Tables {
     }
 }
 
-/// A part of the run: taken from `--resume`'s folder where an earlier run
-/// of the same binary, machine and options left it, else measured (and
-/// kept there).
-fn part(store: Option<&Checkpoints>, plan: &Plan, name: &str, measure: impl FnOnce() -> Result<Tables>) -> Result<Tables> {
+/// A part of the run, measuring the scene `scene`: taken from `--resume`'s
+/// folder where an earlier run of the same binary, machine and options left
+/// it from the same scene files, else measured (and kept there).
+fn part(store: Option<&Checkpoints>, plan: &Plan, name: &str, scene: &str, measure: impl FnOnce() -> Result<Tables>) -> Result<Tables> {
     let Some(store) = store else { return measure() };
-    if let Some(kept) = store.load(name) {
+    let files = super::scene_files(scene);
+    if let Some(kept) = store.load(name, &files) {
         if let Some(t) = Tables::from_json(&kept, plan) {
             eprintln!("bench: {name}: measured by an earlier run, taken from {}", store.dir().display());
             return Ok(t);
@@ -165,7 +166,7 @@ fn part(store: Option<&Checkpoints>, plan: &Plan, name: &str, measure: impl FnOn
         eprintln!("bench: {name}: the kept part in {} is incomplete; measuring it again", store.dir().display());
     }
     let t = measure()?;
-    store.save(name, t.to_json())?;
+    store.save(name, &files, t.to_json())?;
     Ok(t)
 }
 
@@ -212,7 +213,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     };
     let mut t = Tables::default();
     for name in &names {
-        t.append(part(store.as_ref(), &plan, name, || {
+        t.append(part(store.as_ref(), &plan, name, name, || {
             let mut p = Tables::default();
             bench_scene(args, &plan, name, &mut p)?;
             Ok(p)
@@ -221,7 +222,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if !(args.no_render || args.throughput_only) {
         let backends: Vec<BackendKind> = plan.backends.iter().copied().filter(|b| *b != BackendKind::Brute).collect();
         for name in RENDER_SCENES {
-            t.append(part(store.as_ref(), &plan, &format!("render {name}"), || Ok(Tables { renders: path_render_rows(name, &backends, plan.all)?, ..Tables::default() }))?);
+            t.append(part(store.as_ref(), &plan, &format!("render {name}"), name, || Ok(Tables { renders: path_render_rows(name, &backends, plan.all)?, ..Tables::default() }))?);
         }
     }
     let md = report(args, &plan, &t);
