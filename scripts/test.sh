@@ -10,22 +10,42 @@
 # Embree 4 against Mitsuba 3, Blender Cycles and POV-Ray).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+# Each stage's wall time, printed as a table when the script ends (passed or
+# not), so a CI log says where its minutes went.
+stage_names=(); stage_secs=(); stage_start=$SECONDS; stage_now="set-up (Embree, libclang, the reference renderers)"
+stage() {
+    stage_names+=("$stage_now"); stage_secs+=($((SECONDS - stage_start)))
+    stage_now="$1"; stage_start=$SECONDS
+    echo "== $1 =="
+}
+stage_report() {
+    local rc=$?
+    stage_names+=("$stage_now"); stage_secs+=($((SECONDS - stage_start)))
+    echo "== stage times (wall clock, $(nproc) CPUs) =="
+    for i in "${!stage_names[@]}"; do
+        printf '%6d s  %s\n' "${stage_secs[$i]}" "${stage_names[$i]}"
+    done
+    printf '%6d s  total%s\n' "$SECONDS" "$([ $rc -eq 0 ] || echo ", stopped by a failure in the last stage")"
+}
+trap stage_report EXIT
+
 bash scripts/install-deps.sh
 # The reference renderers too, before the suite: tests/harness.rs runs the harness's exporters and statistics.
 bash validation/setup
 
-echo "== test suite (with Embree 3 and Embree 4) =="
+stage "test suite (with Embree 3 and Embree 4)"
 # With the peer BVH libraries built in (tests/peers.rs checks they answer as native does).
 PATHTRACER_REQUIRE_EMBREE=3,4 cargo test --release --features peers
 
 # The passes with Embree hidden share one target folder: their dependencies
 # are built once, and only this crate again for each setting.
-echo "== test suite with both Embrees hidden (PATHTRACER_NO_EMBREE=all) =="
+stage "test suite with both Embrees hidden (PATHTRACER_NO_EMBREE=all)"
 # The BVH-vs-brute oracle test touches no Embree code and takes two minutes,
 # so this pass skips it; everything else runs again.
 PATHTRACER_NO_EMBREE=all CARGO_TARGET_DIR=target/hidden cargo test --release -- --skip native_bvh_matches_brute_force
 
-echo "== the Embree tests with one major hidden at a time (PATHTRACER_NO_EMBREE=3, then 4) =="
+stage "the Embree tests with one major hidden at a time (PATHTRACER_NO_EMBREE=3, then 4)"
 # What depends on which Embree is built: the cross-checks, the CLI's
 # backends, split renders and the documented commands, with the other major
 # required.
@@ -34,11 +54,11 @@ PATHTRACER_NO_EMBREE=3 PATHTRACER_REQUIRE_EMBREE=4 CARGO_TARGET_DIR=target/hidde
 PATHTRACER_NO_EMBREE=4 PATHTRACER_REQUIRE_EMBREE=3 CARGO_TARGET_DIR=target/hidden cargo test --release \
     --test embree_crosscheck --test cli --test split --test docs
 
-echo "== API documentation (cargo doc --no-deps, warnings are errors) =="
+stage "API documentation (cargo doc --no-deps, warnings are errors)"
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --release --quiet
 
-echo "== split renders on a real Slurm cluster (two slurmd on loopback; scripts/slurm-e2e.sh) =="
+stage "split renders on a real Slurm cluster (two slurmd on loopback; scripts/slurm-e2e.sh)"
 bash scripts/slurm-e2e.sh
 
-echo "== validation harness, quick tier (Mitsuba 3, Blender Cycles and POV-Ray references) =="
+stage "validation harness, quick tier (Mitsuba 3, Blender Cycles and POV-Ray references)"
 PATHTRACER_REQUIRE_EMBREE=3,4 bash validation/run quick
