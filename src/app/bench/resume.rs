@@ -53,9 +53,9 @@ impl Checkpoints {
         self.dir.join(format!("{tail}-{:08x}.json", xxh3_128(part.as_bytes()) as u32))
     }
 
-    /// The key of a part read from `files`: the run's, and each file's
-    /// bytes.
-    fn part_key(&self, files: &[PathBuf]) -> String {
+    /// The key of a part read from the scene `files`: the run's, and each
+    /// file's bytes (read here, once per part: `load` and `save` take it).
+    pub(super) fn part_key(&self, files: &[PathBuf]) -> String {
         let hashes: Vec<String> = files
             .iter()
             .map(|f| match std::fs::read(f) {
@@ -66,10 +66,10 @@ impl Checkpoints {
         format!("{}; scene files [{}]", self.key, hashes.join(", "))
     }
 
-    /// The kept measurements of `part` (read from the scene `files`), where
-    /// a file holds them under this run's key; `None` (saying why on stderr
-    /// when a file was there) where they must be measured.
-    pub(super) fn load(&self, part: &str, files: &[PathBuf]) -> Option<Value> {
+    /// The kept measurements of `part`, where a file holds them under `key`
+    /// (`part_key`); `None` (saying why on stderr when a file was there)
+    /// where they must be measured.
+    pub(super) fn load(&self, part: &str, key: &str) -> Option<Value> {
         let path = self.path(part);
         let text = match std::fs::read_to_string(&path) {
             Ok(t) => t,
@@ -90,17 +90,17 @@ impl Checkpoints {
             eprintln!("bench: {}: not a kept part of {part}; measuring it again", path.display());
             return None;
         }
-        if doc["key"] != self.part_key(files).as_str() {
+        if doc["key"] != key {
             eprintln!("bench: {}: measured by another build, machine or options, or from other scene files; measuring {part} again", path.display());
             return None;
         }
         Some(doc["measured"].clone())
     }
 
-    /// Keep `measured` as `part`'s, read from the scene `files` (written
-    /// whole or not at all).
-    pub(super) fn save(&self, part: &str, files: &[PathBuf], measured: Value) -> Result<()> {
-        let doc = serde_json::json!({ "format": FORMAT, "part": part, "key": self.part_key(files), "measured": measured });
+    /// Keep `measured` as `part`'s under `key` (`part_key`; written whole
+    /// or not at all).
+    pub(super) fn save(&self, part: &str, key: &str, measured: Value) -> Result<()> {
+        let doc = serde_json::json!({ "format": FORMAT, "part": part, "key": key, "measured": measured });
         let text = serde_json::to_string_pretty(&doc).map_err(|e| Error::new(format!("bench: {part}: {e}")))?;
         crate::image_io::write_text(&self.path(part), &text)
     }
@@ -142,22 +142,24 @@ mod tests {
     fn a_part_is_kept_only_under_its_own_key() {
         let d = scratch("key");
         let a = Checkpoints::open(&d, "rays 16").unwrap();
-        assert!(a.load("sphere:1M", &[]).is_none());
-        a.save("sphere:1M", &[], serde_json::json!({ "x": exact(2.5) })).unwrap();
-        assert_eq!(parse_exact(&a.load("sphere:1M", &[]).unwrap()["x"]), Some(2.5));
+        let key = a.part_key(&[]);
+        assert!(a.load("sphere:1M", &key).is_none());
+        a.save("sphere:1M", &key, serde_json::json!({ "x": exact(2.5) })).unwrap();
+        assert_eq!(parse_exact(&a.load("sphere:1M", &key).unwrap()["x"]), Some(2.5));
         // Another part, other options: nothing to take.
-        assert!(a.load("sphere:5M", &[]).is_none());
-        assert!(Checkpoints::open(&d, "rays 32").unwrap().load("sphere:1M", &[]).is_none());
+        assert!(a.load("sphere:5M", &key).is_none());
+        let b = Checkpoints::open(&d, "rays 32").unwrap();
+        assert!(b.load("sphere:1M", &b.part_key(&[])).is_none());
         // A scene file edited after its part was kept: measured again.
         let scene = d.join("scene.obj");
         std::fs::write(&scene, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
-        a.save("scene.obj", &[scene.clone()], serde_json::json!({ "x": exact(1.5) })).unwrap();
-        assert!(a.load("scene.obj", &[scene.clone()]).is_some());
+        a.save("scene.obj", &a.part_key(&[scene.clone()]), serde_json::json!({ "x": exact(1.5) })).unwrap();
+        assert!(a.load("scene.obj", &a.part_key(&[scene.clone()])).is_some());
         std::fs::write(&scene, "v 0 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
-        assert!(a.load("scene.obj", &[scene.clone()]).is_none());
+        assert!(a.load("scene.obj", &a.part_key(&[scene.clone()])).is_none());
         // A damaged file is measured again, not trusted.
         std::fs::write(a.path("sphere:1M"), "{\"format\": \"pathtracer-bench-part 1\", \"par").unwrap();
-        assert!(a.load("sphere:1M", &[]).is_none());
+        assert!(a.load("sphere:1M", &key).is_none());
         // Names that differ only in characters a file name cannot hold.
         assert_ne!(a.path("a/b"), a.path("a:b"));
         let _ = std::fs::remove_dir_all(&d);

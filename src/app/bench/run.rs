@@ -157,8 +157,8 @@ impl Tables {
 /// it from the same scene files, else measured (and kept there).
 fn part(store: Option<&Checkpoints>, plan: &Plan, name: &str, scene: &str, measure: impl FnOnce() -> Result<Tables>) -> Result<Tables> {
     let Some(store) = store else { return measure() };
-    let files = super::scene_files(scene);
-    if let Some(kept) = store.load(name, &files) {
+    let key = store.part_key(&super::scene_files(scene));
+    if let Some(kept) = store.load(name, &key) {
         if let Some(t) = Tables::from_json(&kept, plan) {
             eprintln!("bench: {name}: measured by an earlier run, taken from {}", store.dir().display());
             return Ok(t);
@@ -166,7 +166,7 @@ fn part(store: Option<&Checkpoints>, plan: &Plan, name: &str, scene: &str, measu
         eprintln!("bench: {name}: the kept part in {} is incomplete; measuring it again", store.dir().display());
     }
     let t = measure()?;
-    store.save(name, &files, t.to_json())?;
+    store.save(name, &key, t.to_json())?;
     Ok(t)
 }
 
