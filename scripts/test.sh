@@ -48,12 +48,13 @@ stage "test suite with both Embrees hidden (PATHTRACER_NO_EMBREE=all)"
 # CLI (backend choice and messages), the documented commands, batches and
 # hard cases over every backend, split renders, validate's geometry checks,
 # the cross-checks (which report themselves skipped). The rest (light
-# transport, BDPT, materials, samplers, loaders, fuzz, the harness, the
-# BVH-vs-brute oracle) trace native and brute force only once Embree is
-# hidden: the same computations as the first pass, not run twice.
+# transport, BDPT, materials, samplers, loaders, fuzz, the harness, the peer
+# libraries against native, the BVH-vs-brute oracle) trace native, brute
+# force and the peers only once Embree is hidden: the same computations as
+# the first pass, not run twice.
 PATHTRACER_NO_EMBREE=all cargo test --release --features peers --no-run
 PATHTRACER_NO_EMBREE=all cargo test --release --features peers --lib \
-    --test cli --test docs --test batches --test hard_cases --test split --test validate --test embree_crosscheck --test peers
+    --test cli --test docs --test batches --test hard_cases --test split --test validate --test embree_crosscheck
 
 stage "the Embree tests with one major hidden at a time (PATHTRACER_NO_EMBREE=3, then 4)"
 # What depends on which Embree is built: the cross-checks, the CLI's
