@@ -7,11 +7,13 @@
 //! perf record -g target/release/examples/trace_rays subdiv:bunny:1.5M native random 10
 //! ```
 //! SCENE is a bench scene name or file; BACKEND a `--backend` value; KIND
-//! `camera`, `shadow` or `random` (the bench's rays and batch calls).
+//! `camera`, `shadow`, `random` or `diffuse` (the bench's rays and batch
+//! calls; diffuse rays leave the camera rays' hits in 32x32 tiles). The
+//! `PATHTRACER_NATIVE_*` switches apply as they do to `pathtracer`.
 
 use clap::ValueEnum;
 use pathtracer::accel::{self, BackendKind};
-use pathtracer::accel::workloads::{camera_rays, random_rays, shadow_rays};
+use pathtracer::accel::workloads::{camera_rays, diffuse_rays, random_rays, shadow_rays, tile_order};
 use pathtracer::app::bench::load_bench_scene;
 use pathtracer::camera::Camera;
 use std::time::Instant;
@@ -26,12 +28,13 @@ fn main() {
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [scene, backend, kind, seconds] = args.as_slice() else {
-        return Err("usage: trace_rays SCENE BACKEND camera|shadow|random SECONDS".into());
+        return Err("usage: trace_rays SCENE BACKEND camera|shadow|random|diffuse SECONDS".into());
     };
     let backend = BackendKind::from_str(backend, true)?;
     let seconds: f64 = seconds.parse().map_err(|_| format!("SECONDS: not a number: {seconds}"))?;
     let scene = load_bench_scene(scene).map_err(|e| e.to_string())?;
-    let built = accel::build(backend, &scene.shapes, 0).map_err(|e| e.to_string())?;
+    let options = accel::BuildOptions::from_lookup(0, |k| std::env::var(k).ok()).map_err(|e| e.to_string())?;
+    let built = accel::build_with(backend, &scene.shapes, &options).map_err(|e| e.to_string())?;
     let accel = built.accel.as_ref();
     let n = 1 << 20;
     let mut cam = Camera::from_scene(&scene);
@@ -40,7 +43,8 @@ fn run() -> Result<(), String> {
         "camera" => camera_rays(&cam, 1024, 1024),
         "shadow" => shadow_rays(&scene, accel, &camera_rays(&cam, 1024, 1024)),
         "random" => random_rays(&scene, n, 1),
-        k => return Err(format!("KIND: camera, shadow or random, not {k}")),
+        "diffuse" => diffuse_rays(&scene, accel, &tile_order(&camera_rays(&cam, 1024, 1024), 1024, 1024, 32), 7),
+        k => return Err(format!("KIND: camera, shadow, random or diffuse, not {k}")),
     };
     let start = Instant::now();
     let (mut traced, mut hits) = (0usize, 0usize);
