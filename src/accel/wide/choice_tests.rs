@@ -71,7 +71,7 @@ fn interleaving_reaches_incoherent_batches_on_middling_trees() {
         }
         if b.policy.avx() {
             let way = match want {
-                InterleaveReach::None => policy::ClosestBatches::StreamsWhereCoherent,
+                InterleaveReach::None => policy::ClosestBatches::StreamsWhereShared,
                 InterleaveReach::Incoherent => policy::ClosestBatches::StreamsElseInterleaved,
                 InterleaveReach::All => policy::ClosestBatches::Interleaved,
             };

@@ -15,7 +15,7 @@
 //! watertight test and the same tie-break (`closer`), so its closest hit is
 //! the same whatever order the leaves come in.
 
-use super::stream::{octant_planes, octant_streams, ready, StreamRays, STREAM};
+use super::stream::{octant, octant_planes, octant_streams, octant_streams_except, ready, StreamRays, STREAM};
 use super::triangle::Shear;
 use super::stack::WalkStack;
 use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
@@ -33,6 +33,49 @@ pub(super) const STREAM_MIN_RAYS: usize = 128;
 /// origins is under this share of the tree's diagonal: its rays start
 /// close together, so streams of them share their nodes.
 pub(super) const COHERENT_STEP: f32 = 1.0 / 32.0;
+
+/// A batch goes on in streams where its first full stream made at least
+/// `SHARED.0 / SHARED.1` ray-node tests per node fetched: its rays shared
+/// the nodes, where a stream pays for its bookkeeping. Measured on a Zen 3
+/// EPYC (tests per fetch: streams ÷ one ray at a time, 1 thread), random
+/// rays: CBbunny 5.70: 1.13, arch:2M 5.78: 1.11, beetle 2.78: 1.02, cow
+/// 2.68: 0.88, maxplanck 2.06: 0.89; diffuse rays in 32x32 tiles: arch:2M
+/// 3.87: 0.89, CBbunny 8.08: 1.13, stadium:2M 11.9: 1.22, maxplanck 12.7:
+/// 1.32, beetle 13.8: 1.25, cow 23.7: 1.26.
+const SHARED: (u64, u64) = (9, 2);
+
+/// What a stream did: nodes fetched, and ray-node tests made at them.
+#[derive(Default)]
+struct StreamWork {
+    nodes: u64,
+    tests: u64,
+}
+
+impl StreamWork {
+    /// Whether the stream's rays shared its nodes enough (`SHARED`).
+    fn shared(&self) -> bool {
+        self.tests * SHARED.1 >= self.nodes * SHARED.0
+    }
+}
+
+/// The batch's first stream to fill (`STREAM` valid rays of one octant, in
+/// batch order), as `octant_streams` would trace it first, and its octant.
+fn first_full_stream(rays: &[Ray]) -> Option<([u32; STREAM], usize)> {
+    let mut waiting = [[0u32; STREAM]; 8];
+    let mut count = [0usize; 8];
+    for (i, r) in rays.iter().enumerate() {
+        if !r.is_valid() {
+            continue;
+        }
+        let oct = octant(r.dir);
+        waiting[oct][count[oct]] = i as u32;
+        count[oct] += 1;
+        if count[oct] == STREAM {
+            return Some((waiting[oct], oct));
+        }
+    }
+    None
+}
 
 impl<const W: usize> WideBvh<W> {
     /// Whether `rays` go in streams (`closest_streams`) rather than one at
@@ -67,13 +110,41 @@ impl<const W: usize> WideBvh<W> {
             return self.closest_all::<true>(rays, hits);
         }
         hits.fill(None);
-        octant_streams(rays, |which, oct| self.closest_stream(rays, which, oct, hits));
+        octant_streams(rays, |which, oct| self.closest_stream(rays, which, oct, hits, &mut StreamWork::default()));
+    }
+
+    /// `hits[i]` = the closest hit of `rays[i]`: the batch's first full
+    /// stream is traced as a stream, and the rest go in streams too where
+    /// that stream's rays shared its nodes (`SHARED`), else one ray at a
+    /// time (`closest_batch_avx`). The way depends on the batch alone.
+    ///
+    /// # Safety
+    /// As `closest_streams`.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest_streams_where_shared(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        debug_assert!(W == 8);
+        let first = if rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY { None } else { first_full_stream(rays) };
+        let Some((which, oct)) = first else {
+            return self.closest_batch_avx(rays, hits);
+        };
+        hits.fill(None);
+        let mut work = StreamWork::default();
+        self.closest_stream(rays, &which, oct, hits, &mut work);
+        // The first stream: the valid rays of octant `oct` up to `last`.
+        let last = which[STREAM - 1] as usize;
+        let traced = |i: usize, o: usize| o == oct && i <= last;
+        if work.shared() {
+            octant_streams_except(rays, traced, |which, oct| self.closest_stream(rays, which, oct, hits, &mut work));
+        } else {
+            self.closest_batch_except(rays, hits, |i| i <= last && rays[i].is_valid() && octant(rays[i].dir) == oct);
+        }
     }
 
     /// One stream: `which` (at most `STREAM` indices into `rays`, all valid,
-    /// all of octant `oct`).
+    /// all of octant `oct`); its node fetches and ray-node tests are added
+    /// to `work`.
     #[inline(always)]
-    unsafe fn closest_stream(&self, rays: &[Ray], which: &[u32], oct: usize, hits: &mut [Option<Hit>]) {
+    unsafe fn closest_stream(&self, rays: &[Ray], which: &[u32], oct: usize, hits: &mut [Option<Hit>], work: &mut StreamWork) {
         let n = which.len();
         let mut s = StreamRays::new(rays, which);
         let mut best: [Option<Hit>; STREAM] = [None; STREAM];
@@ -86,6 +157,8 @@ impl<const W: usize> WideBvh<W> {
         let (mut code, mut entered) = (self.tree.root, StreamRays::all(n));
         loop {
             let node = &self.tree.nodes[code as usize];
+            work.nodes += 1;
+            work.tests += entered.count_ones() as u64;
             let e = self.stream_enter(node, &planes, &s, entered);
             if e.children != 0 {
                 let mark = sp;
@@ -189,6 +262,75 @@ mod tests {
             }
             let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
             assert_eq!(bad, 0, "batches of {chunk}: {bad} hits differ from brute force");
+        }
+    }
+
+    /// `closest_streams_where_shared` as its callers run it.
+    fn where_shared(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        // SAFETY: the tests call this only after `avx_or_skip`.
+        unsafe { bvh.closest_streams_where_shared(rays, hits) }
+    }
+
+    /// Whether the first full stream of `rays` shares its nodes (`None`:
+    /// the batch has no full stream).
+    fn first_shared(bvh: &WideBvh<8>, rays: &[Ray]) -> Option<bool> {
+        let (which, oct) = first_full_stream(rays)?;
+        let mut hits = vec![None; rays.len()];
+        let mut work = StreamWork::default();
+        // SAFETY: as above.
+        unsafe { bvh.closest_stream(rays, &which, oct, &mut hits, &mut work) };
+        Some(work.shared())
+    }
+
+    /// Streams where the first stream's rays share their nodes, else one ray
+    /// at a time: brute force's hits either way, the first stream's rays
+    /// (traced as a stream) neither traced again nor left out, invalid rays
+    /// and every octant among them, batches from one ray up.
+    #[test]
+    fn streams_where_shared_match_brute_force() {
+        if !avx_or_skip("the closest-hit streams") {
+            return;
+        }
+        let shapes = shapes();
+        let rays = rays(&shapes);
+        let brute = BruteForce::new(&shapes);
+        let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
+        let bvh = WideBvh::<8>::build(&shapes);
+        // Batches of 777 take both ways (the test rays come in runs of
+        // coherent and random rays).
+        let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r)).collect();
+        assert!(ways.contains(&Some(true)) && ways.contains(&Some(false)), "batches of 777 take one way only: {ways:?}");
+        for chunk in [rays.len(), 4096, 777, 128, 127, 64, 3, 1] {
+            let mut got = vec![None; rays.len()];
+            for (r, h) in rays.chunks(chunk).zip(got.chunks_mut(chunk)) {
+                where_shared(&bvh, r, h);
+            }
+            let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
+            assert_eq!(bad, 0, "batches of {chunk}: {bad} hits differ from brute force");
+        }
+    }
+
+    /// On a bench scene, a tile's diffuse rays share their nodes and random
+    /// rays do not (the two ways the rule takes), and either way the batch
+    /// finds the single-ray hits.
+    #[test]
+    fn the_first_stream_chooses_the_way() {
+        if !avx_or_skip("the closest-hit streams") {
+            return;
+        }
+        let scene = load_bench_scene("subdiv:CBbunny:100k");
+        let bvh = WideBvh::<8>::build(&scene.shapes);
+        let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
+        let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
+        let random = crate::accel::workloads::random_rays(&scene, 8192, 2);
+        let (d, r) = (&diffuse[..1024], &random[..1024]);
+        assert_eq!(first_shared(&bvh, d), Some(true), "a tile's diffuse rays do not share their nodes");
+        assert_eq!(first_shared(&bvh, r), Some(false), "random rays share their nodes");
+        for rays in [d, r] {
+            let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
+            let mut got = vec![None; rays.len()];
+            where_shared(&bvh, rays, &mut got);
+            assert!(got == want, "hits differ from single rays");
         }
     }
 

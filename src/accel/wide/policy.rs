@@ -4,7 +4,7 @@
 //! options, the CPU and the tree itself, and never changes afterwards: the
 //! same batch always takes the same way, whatever ran before it. Only the
 //! way a closest-hit batch goes may depend on the batch (`ClosestBatches`'
-//! `StreamsWhereCoherent` and `StreamsElseInterleaved`), and then on
+//! `StreamsWhereShared` and `StreamsElseInterleaved`), and then on
 //! nothing but the batch's own rays.
 //! No choice changes an answer (every way gives the scalar code's bits).
 
@@ -43,9 +43,10 @@ pub(super) enum ClosestBatches {
     Interleaved,
     /// In streams (`hit_stream`).
     Streams,
-    /// In streams where the batch's own rays start close together
-    /// (`streams_pay`), else one ray at a time.
-    StreamsWhereCoherent,
+    /// In streams where the batch's first full stream shows its rays
+    /// sharing the nodes (`closest_streams_where_shared`), else one ray at
+    /// a time.
+    StreamsWhereShared,
     /// In streams where the batch's own rays start close together, else
     /// interleaved: a tree of middling size whose incoherent rays miss
     /// the nearer caches (`interleave_reach`).
@@ -136,7 +137,7 @@ impl Policy {
             // 1.43, sphere 5M 1.16-1.27 / 2.18, grass 2M 0.80 / 1.27-1.34.
             BatchWay::Auto if interleave => ClosestBatches::Interleaved,
             BatchWay::Auto if reach == InterleaveReach::Incoherent => ClosestBatches::StreamsElseInterleaved,
-            BatchWay::Auto if streams => ClosestBatches::StreamsWhereCoherent,
+            BatchWay::Auto if streams => ClosestBatches::StreamsWhereShared,
             BatchWay::Streams if streams => ClosestBatches::Streams,
             BatchWay::Interleaved if avx => ClosestBatches::Interleaved,
             _ => ClosestBatches::Single,
@@ -197,7 +198,7 @@ impl Policy {
             ClosestBatches::Single => "closest hits one by one",
             ClosestBatches::Interleaved => "closest hits interleaved (camera rays too)",
             ClosestBatches::Streams => "closest-hit streams",
-            ClosestBatches::StreamsWhereCoherent => "closest-hit streams where coherent",
+            ClosestBatches::StreamsWhereShared => "closest-hit streams where shared",
             ClosestBatches::StreamsElseInterleaved => "closest-hit streams where coherent, else interleaved",
         };
         let shadows = match self.shadows {

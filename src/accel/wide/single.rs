@@ -130,13 +130,27 @@ impl<const W: usize> WideBvh<W> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_batch_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.closest_batch_except(rays, hits, |_| false);
+    }
+
+    /// `closest_batch_avx` of the rays but those that `traced(index)`,
+    /// whose hits are left as they are.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest_batch_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], traced: impl Fn(usize) -> bool) {
         if self.tree.root == EMPTY {
             hits.fill(None);
             return;
         }
-        for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+        for (c, (r, h)) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)).enumerate() {
             let soa = RaysSoA::new_with::<false>(r);
             for (i, (ray, hit)) in r.iter().zip(h.iter_mut()).enumerate() {
+                if traced(c * PACKET + i) {
+                    continue;
+                }
                 *hit = if soa.valid >> i & 1 == 0 {
                     None
                 } else {

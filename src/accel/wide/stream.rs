@@ -75,14 +75,29 @@ impl StreamRays {
 /// octant of their directions, in batch order, into streams of up to
 /// `STREAM`: each stream as it fills, then each octant's rest.
 #[inline(always)]
-pub(super) fn octant_streams(rays: &[Ray], mut trace: impl FnMut(&[u32], usize)) {
+pub(super) fn octant_streams(rays: &[Ray], trace: impl FnMut(&[u32], usize)) {
+    octant_streams_except(rays, |_, _| false, trace)
+}
+
+/// The octant of a direction: bit a set where its sign bit on axis a is.
+#[inline(always)]
+pub(super) fn octant(d: glam::Vec3) -> usize {
+    (d.x.is_sign_negative() as usize) | (d.y.is_sign_negative() as usize) << 1 | (d.z.is_sign_negative() as usize) << 2
+}
+
+/// `octant_streams` of the rays but those that `skip(index, octant)`.
+#[inline(always)]
+pub(super) fn octant_streams_except(rays: &[Ray], skip: impl Fn(usize, usize) -> bool, mut trace: impl FnMut(&[u32], usize)) {
     let mut waiting = [[0u32; STREAM]; 8];
     let mut count = [0usize; 8];
     for (i, r) in rays.iter().enumerate() {
         if !r.is_valid() {
             continue;
         }
-        let oct = (r.dir.x.is_sign_negative() as usize) | (r.dir.y.is_sign_negative() as usize) << 1 | (r.dir.z.is_sign_negative() as usize) << 2;
+        let oct = octant(r.dir);
+        if skip(i, oct) {
+            continue;
+        }
         waiting[oct][count[oct]] = i as u32;
         count[oct] += 1;
         if count[oct] == STREAM {
@@ -188,7 +203,7 @@ impl<const W: usize> WideBvh<W> {
                 let r = t.trailing_zeros() as usize;
                 t &= t - 1;
                 let i = 32 * half + r;
-                let (t0, t1) = slab_planes::<__m256>(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.far[i]);
+                let (t0, t1) = slab_planes::<__m256>(&lo, &hi, [s.o[0][i], s.o[1][i], s.o[2][i]], [s.inv[0][i], s.inv[1][i], s.inv[2][i]], s.tmin[i], s.tmax[i]);
                 let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1);
                 *m = _mm256_or_si256(*m, _mm256_and_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(1 << r)));
                 near = _mm256_min_ps(near, _mm256_blendv_ps(inf, t0, hit));
