@@ -8,7 +8,11 @@
 //! closest distance; a leaf is tested by each ray that entered it. Where a
 //! batch's rays start near one another (a tile's bounce rays), they share
 //! most of their node fetches; where they do not (rays from anywhere in the
-//! scene), the stream costs more than single rays.
+//! scene), the stream costs more than single rays. Which batches stream:
+//! on trees whose rays miss the caches, those whose origins lie close
+//! together (`streams_pay`, else interleaved); on the others, those whose
+//! first full stream shows its rays sharing the nodes
+//! (`closest_streams_where_shared`, else one ray at a time).
 //!
 //! Answers equal single-ray traversal's: each ray tests every triangle
 //! whose leaf box it enters within its current closest distance, with the

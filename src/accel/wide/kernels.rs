@@ -150,4 +150,3 @@ pub(super) unsafe fn slab_planes<V: Lanes>(lo: &[V; 3], hi: &[V; 3], o: [f32; 3]
     }
     (t0, t1.mul(V::splat(ROBUST_SCALE)))
 }
-
