@@ -247,7 +247,10 @@ mod tests {
     /// Streams find brute force's closest hits: meshes and a sphere in one
     /// tree, camera, random and tight rays of every octant, short rays,
     /// rays starting inside boxes, invalid rays among them; batches of
-    /// every size from one ray to all of them.
+    /// every size from one ray to all of them; all in streams, and in
+    /// streams where the first stream's rays share their nodes, else one
+    /// ray at a time (both ways taken; the first stream's rays neither
+    /// traced again nor left out).
     #[test]
     fn closest_streams_match_brute_force() {
         if !avx_or_skip("the closest-hit streams") {
@@ -259,13 +262,20 @@ mod tests {
         let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
         assert!(want.iter().filter(|h| h.is_some()).count() > 1000 && want.iter().filter(|h| h.is_none()).count() > 1000);
         let bvh = WideBvh::<8>::build(&shapes);
-        for chunk in [rays.len(), 4096, 777, 64, 65, 3, 1] {
-            let mut got = vec![None; rays.len()];
-            for (r, h) in rays.chunks(chunk).zip(got.chunks_mut(chunk)) {
-                streams(&bvh, r, h);
+        // Batches of 777 take both ways (the test rays come in runs of
+        // coherent and random rays).
+        let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r)).collect();
+        assert!(ways.contains(&Some(true)) && ways.contains(&Some(false)), "batches of 777 take one way only: {ways:?}");
+        type Way = fn(&WideBvh<8>, &[Ray], &mut [Option<Hit>]);
+        for (name, way) in [("streams", streams as Way), ("streams where shared", where_shared as Way)] {
+            for chunk in [rays.len(), 4096, 777, 128, 127, 65, 64, 3, 1] {
+                let mut got = vec![None; rays.len()];
+                for (r, h) in rays.chunks(chunk).zip(got.chunks_mut(chunk)) {
+                    way(&bvh, r, h);
+                }
+                let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
+                assert_eq!(bad, 0, "{name}, batches of {chunk}: {bad} hits differ from brute force");
             }
-            let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
-            assert_eq!(bad, 0, "batches of {chunk}: {bad} hits differ from brute force");
         }
     }
 
@@ -284,34 +294,6 @@ mod tests {
         // SAFETY: as above.
         unsafe { bvh.closest_stream(rays, &which, oct, &mut hits, &mut work) };
         Some(work.shared())
-    }
-
-    /// Streams where the first stream's rays share their nodes, else one ray
-    /// at a time: brute force's hits either way, the first stream's rays
-    /// (traced as a stream) neither traced again nor left out, invalid rays
-    /// and every octant among them, batches from one ray up.
-    #[test]
-    fn streams_where_shared_match_brute_force() {
-        if !avx_or_skip("the closest-hit streams") {
-            return;
-        }
-        let shapes = shapes();
-        let rays = rays(&shapes);
-        let brute = BruteForce::new(&shapes);
-        let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
-        let bvh = WideBvh::<8>::build(&shapes);
-        // Batches of 777 take both ways (the test rays come in runs of
-        // coherent and random rays).
-        let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r)).collect();
-        assert!(ways.contains(&Some(true)) && ways.contains(&Some(false)), "batches of 777 take one way only: {ways:?}");
-        for chunk in [rays.len(), 4096, 777, 128, 127, 64, 3, 1] {
-            let mut got = vec![None; rays.len()];
-            for (r, h) in rays.chunks(chunk).zip(got.chunks_mut(chunk)) {
-                where_shared(&bvh, r, h);
-            }
-            let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
-            assert_eq!(bad, 0, "batches of {chunk}: {bad} hits differ from brute force");
-        }
     }
 
     /// On a bench scene, a tile's diffuse rays share their nodes and random
