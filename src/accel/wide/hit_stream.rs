@@ -19,7 +19,7 @@
 //! watertight test and the same tie-break (`closer`), so its closest hit is
 //! the same whatever order the leaves come in.
 
-use super::stream::{octant, octant_planes, octant_streams, octant_streams_except, ready, StreamRays, STREAM};
+use super::stream::{octant, octant_planes, octant_streams, octant_streams_until, ready, StreamRays, STREAM};
 use super::triangle::Shear;
 use super::stack::WalkStack;
 use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
@@ -65,20 +65,14 @@ impl StreamWork {
 /// The batch's first stream to fill (`STREAM` valid rays of one octant, in
 /// batch order), as `octant_streams` would trace it first, and its octant.
 fn first_full_stream(rays: &[Ray]) -> Option<([u32; STREAM], usize)> {
-    let mut waiting = [[0u32; STREAM]; 8];
-    let mut count = [0usize; 8];
-    for (i, r) in rays.iter().enumerate() {
-        if !r.is_valid() {
-            continue;
-        }
-        let oct = octant(r.dir);
-        waiting[oct][count[oct]] = i as u32;
-        count[oct] += 1;
-        if count[oct] == STREAM {
-            return Some((waiting[oct], oct));
-        }
-    }
-    None
+    // Full streams are traced before any octant's rest: a first stream
+    // shorter than `STREAM` means the batch has none.
+    let mut first = None;
+    octant_streams_until(rays, |_, _| false, |which, oct| {
+        first = which.try_into().ok().map(|w: [u32; STREAM]| (w, oct));
+        false
+    });
+    first
 }
 
 impl<const W: usize> WideBvh<W> {
@@ -138,7 +132,10 @@ impl<const W: usize> WideBvh<W> {
         let last = which[STREAM - 1] as usize;
         let traced = |i: usize, o: usize| o == oct && i <= last;
         if work.shared() {
-            octant_streams_except(rays, traced, |which, oct| self.closest_stream(rays, which, oct, hits, &mut work));
+            octant_streams_until(rays, traced, |which, oct| {
+                self.closest_stream(rays, which, oct, hits, &mut work);
+                true
+            });
         } else {
             self.closest_batch_except(rays, hits, |i| i <= last && rays[i].is_valid() && octant(rays[i].dir) == oct);
         }

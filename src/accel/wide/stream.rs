@@ -75,8 +75,11 @@ impl StreamRays {
 /// octant of their directions, in batch order, into streams of up to
 /// `STREAM`: each stream as it fills, then each octant's rest.
 #[inline(always)]
-pub(super) fn octant_streams(rays: &[Ray], trace: impl FnMut(&[u32], usize)) {
-    octant_streams_except(rays, |_, _| false, trace)
+pub(super) fn octant_streams(rays: &[Ray], mut trace: impl FnMut(&[u32], usize)) {
+    octant_streams_until(rays, |_, _| false, |which, oct| {
+        trace(which, oct);
+        true
+    })
 }
 
 /// The octant of a direction: bit a set where its sign bit on axis a is.
@@ -85,9 +88,10 @@ pub(super) fn octant(d: glam::Vec3) -> usize {
     (d.x.is_sign_negative() as usize) | (d.y.is_sign_negative() as usize) << 1 | (d.z.is_sign_negative() as usize) << 2
 }
 
-/// `octant_streams` of the rays but those that `skip(index, octant)`.
+/// `octant_streams` of the rays but those that `skip(index, octant)`,
+/// until `trace` returns false.
 #[inline(always)]
-pub(super) fn octant_streams_except(rays: &[Ray], skip: impl Fn(usize, usize) -> bool, mut trace: impl FnMut(&[u32], usize)) {
+pub(super) fn octant_streams_until(rays: &[Ray], skip: impl Fn(usize, usize) -> bool, mut trace: impl FnMut(&[u32], usize) -> bool) {
     let mut waiting = [[0u32; STREAM]; 8];
     let mut count = [0usize; 8];
     for (i, r) in rays.iter().enumerate() {
@@ -101,13 +105,15 @@ pub(super) fn octant_streams_except(rays: &[Ray], skip: impl Fn(usize, usize) ->
         waiting[oct][count[oct]] = i as u32;
         count[oct] += 1;
         if count[oct] == STREAM {
-            trace(&waiting[oct][..STREAM], oct);
+            if !trace(&waiting[oct][..STREAM], oct) {
+                return;
+            }
             count[oct] = 0;
         }
     }
     for oct in 0..8 {
-        if count[oct] > 0 {
-            trace(&waiting[oct][..count[oct]], oct);
+        if count[oct] > 0 && !trace(&waiting[oct][..count[oct]], oct) {
+            return;
         }
     }
 }
