@@ -71,9 +71,9 @@ fn interleaving_reaches_incoherent_batches_on_middling_trees() {
         }
         if b.policy.avx() {
             let way = match want {
-                InterleaveReach::None => policy::ClosestBatches::StreamsWhereShared,
+                InterleaveReach::None => policy::ClosestBatches::StreamsWhereShared(policy::Unshared::Single),
                 InterleaveReach::Incoherent => policy::ClosestBatches::StreamsElseInterleaved,
-                InterleaveReach::All => policy::ClosestBatches::Interleaved,
+                InterleaveReach::All => policy::ClosestBatches::StreamsWhereShared(policy::Unshared::Interleaved),
             };
             assert_eq!(b.policy.closest, way, "{spec}");
         }
@@ -192,7 +192,7 @@ fn spatial_splits_are_kept_only_where_the_sampled_work_falls_enough() {
     }
 }
 
-/// Camera batches (`intersect_coherent`) go the way the tree's incoherent
+/// Camera batches (`intersect_coherent`) go the way the tree's unshared
 /// closest-hit batches go: interleaved on a dense mesh too large for the
 /// caches, packets on the sparse architecture scene; either way they find
 /// exactly the single-ray hits.
@@ -204,7 +204,7 @@ fn camera_batches_interleave_where_the_tree_does() {
     for (spec, interleaved) in [("sphere:300k", true), ("arch:100k", false)] {
         let scene = crate::scene::generated::for_tests(spec);
         let b = WideBvh::<8>::build(&scene.shapes);
-        assert_eq!(b.policy.closest == ClosestBatches::Interleaved, interleaved, "{spec}: incoherent batches");
+        assert_eq!(b.policy.closest == ClosestBatches::StreamsWhereShared(policy::Unshared::Interleaved), interleaved, "{spec}: incoherent batches");
         assert_eq!(b.policy.camera_interleaved(), interleaved, "{spec}: camera batches");
         let rays = camera_rays(&Camera::from_scene(&scene), 160, 120);
         let want: Vec<Option<Hit>> = rays.iter().map(|r| b.intersect(r)).collect();

@@ -9,10 +9,12 @@
 //! batch's rays start near one another (a tile's bounce rays), they share
 //! most of their node fetches; where they do not (rays from anywhere in the
 //! scene), the stream costs more than single rays. Which batches stream:
-//! on trees whose rays miss the caches, those whose origins lie close
-//! together (`streams_pay`, else interleaved); on the others, those whose
-//! first full stream shows its rays sharing the nodes
-//! (`closest_streams_where_shared`, else one ray at a time).
+//! those whose first full stream shows its rays sharing the nodes
+//! (`closest_streams_where_shared`), else one ray at a time, or
+//! interleaved on trees too large for the caches, where the stream must
+//! share more to pay; on trees of middling size whose rays miss the
+//! nearer caches, those whose origins lie close together (`streams_pay`,
+//! else interleaved).
 //!
 //! Answers equal single-ray traversal's: each ray tests every triangle
 //! whose leaf box it enters within its current closest distance, with the
@@ -22,6 +24,7 @@
 use super::stream::{octant, octant_planes, octant_streams, octant_streams_until, ready, StreamRays, STREAM};
 use super::triangle::Shear;
 use super::stack::WalkStack;
+use super::policy::Unshared;
 use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::prims::closer;
 use crate::accel::Hit;
@@ -48,6 +51,19 @@ pub(super) const COHERENT_STEP: f32 = 1.0 / 32.0;
 /// 1.32, beetle 13.8: 1.25, cow 23.7: 1.26.
 const SHARED: (u64, u64) = (9, 2);
 
+/// Where the batch's other way is interleaving (trees too large for the
+/// caches), which already overlaps the misses a stream would share, the
+/// first stream must make at least 6 tests per fetch. Diffuse rays in
+/// 32x32 tiles, 1 thread, native ÷ Embree 4 (Zen 3 EPYC), interleaved /
+/// this rule at 4.5, 6 and 8 tests per fetch: sphere 1M 0.92 / 1.17 /
+/// 1.15 / 1.09 (its first streams made 3-19 tests per fetch), sphere 5M
+/// 1.21 / 1.12 / 1.18 / 1.18 (2-6), subdivided bunny 1.5M 1.05 / 1.14 /
+/// 1.12 / 1.13 (2-52); grass 2M's diffuse streams (3-4) and every random
+/// stream (1.1-2.2) go interleaved at any of these. Random batches do not
+/// try a stream there (`streams_pay`): tried on each, the first stream
+/// cost sphere 5M's random rays 5-11 %.
+const SHARED_OVER_INTERLEAVED: (u64, u64) = (6, 1);
+
 /// What a stream did: nodes fetched, and ray-node tests made at them.
 #[derive(Default)]
 struct StreamWork {
@@ -56,9 +72,15 @@ struct StreamWork {
 }
 
 impl StreamWork {
-    /// Whether the stream's rays shared its nodes enough (`SHARED`).
-    fn shared(&self) -> bool {
-        self.tests * SHARED.1 >= self.nodes * SHARED.0
+    /// Whether the stream's rays shared its nodes enough to go on in
+    /// streams rather than the way `otherwise` says (`SHARED`,
+    /// `SHARED_OVER_INTERLEAVED`).
+    fn shared(&self, otherwise: Unshared) -> bool {
+        let (num, den) = match otherwise {
+            Unshared::Single => SHARED,
+            Unshared::Interleaved => SHARED_OVER_INTERLEAVED,
+        };
+        self.tests * den >= self.nodes * num
     }
 }
 
@@ -113,17 +135,22 @@ impl<const W: usize> WideBvh<W> {
 
     /// `hits[i]` = the closest hit of `rays[i]`: the batch's first full
     /// stream is traced as a stream, and the rest go in streams too where
-    /// that stream's rays shared its nodes (`SHARED`), else one ray at a
-    /// time (`closest_batch_avx`). The way depends on the batch alone.
+    /// that stream's rays shared its nodes (`StreamWork::shared`), else as
+    /// `otherwise` says. The way depends on the batch alone.
     ///
     /// # Safety
     /// As `closest_streams`.
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn closest_streams_where_shared(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+    pub(super) unsafe fn closest_streams_where_shared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared) {
         debug_assert!(W == 8);
-        let first = if rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY { None } else { first_full_stream(rays) };
+        // On trees too large for the caches the first stream itself costs
+        // (its fetches miss, one after another, where interleaved rays
+        // overlap theirs), so it is traced only where the batch's rays start
+        // close together and could share.
+        let unlikely = otherwise == Unshared::Interleaved && !self.streams_pay(rays);
+        let first = if unlikely || rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY { None } else { first_full_stream(rays) };
         let Some((which, oct)) = first else {
-            return self.closest_batch_avx(rays, hits);
+            return self.closest_unshared(rays, hits, otherwise, |_| false);
         };
         hits.fill(None);
         let mut work = StreamWork::default();
@@ -131,13 +158,26 @@ impl<const W: usize> WideBvh<W> {
         // The first stream: the valid rays of octant `oct` up to `last`.
         let last = which[STREAM - 1] as usize;
         let traced = |i: usize, o: usize| o == oct && i <= last;
-        if work.shared() {
+        if work.shared(otherwise) {
             octant_streams_until(rays, traced, |which, oct| {
                 self.closest_stream(rays, which, oct, hits, &mut work);
                 true
             });
         } else {
-            self.closest_batch_except(rays, hits, |i| i <= last && rays[i].is_valid() && octant(rays[i].dir) == oct);
+            self.closest_unshared(rays, hits, otherwise, |i| i <= last && rays[i].is_valid() && octant(rays[i].dir) == oct);
+        }
+    }
+
+    /// The rays of a batch but those that `traced(index)`, the way
+    /// `otherwise` says.
+    ///
+    /// # Safety
+    /// As `closest_streams`.
+    #[inline(always)]
+    unsafe fn closest_unshared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared, traced: impl Fn(usize) -> bool) {
+        match otherwise {
+            Unshared::Single => self.closest_batch_except(rays, hits, traced),
+            Unshared::Interleaved => self.closest_interleaved_except(rays, hits, traced),
         }
     }
 
@@ -246,8 +286,8 @@ mod tests {
     /// rays starting inside boxes, invalid rays among them; batches of
     /// every size from one ray to all of them; all in streams, and in
     /// streams where the first stream's rays share their nodes, else one
-    /// ray at a time (both ways taken; the first stream's rays neither
-    /// traced again nor left out).
+    /// ray at a time or interleaved (both ways taken; the first stream's
+    /// rays neither traced again nor left out).
     #[test]
     fn closest_streams_match_brute_force() {
         if !avx_or_skip("the closest-hit streams") {
@@ -261,10 +301,13 @@ mod tests {
         let bvh = WideBvh::<8>::build(&shapes);
         // Batches of 777 take both ways (the test rays come in runs of
         // coherent and random rays).
-        let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r)).collect();
-        assert!(ways.contains(&Some(true)) && ways.contains(&Some(false)), "batches of 777 take one way only: {ways:?}");
+        for otherwise in [Unshared::Single, Unshared::Interleaved] {
+            let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r, otherwise)).collect();
+            assert!(ways.contains(&Some(true)) && ways.contains(&Some(false)), "{otherwise:?}: batches of 777 take one way only: {ways:?}");
+        }
         type Way = fn(&WideBvh<8>, &[Ray], &mut [Option<Hit>]);
-        for (name, way) in [("streams", streams as Way), ("streams where shared", where_shared as Way)] {
+        let ways = [("streams", streams as Way), ("streams where shared, else single", where_shared as Way), ("streams where shared, else interleaved", where_shared_else_interleaved as Way)];
+        for (name, way) in ways {
             for chunk in [rays.len(), 4096, 777, 128, 127, 65, 64, 3, 1] {
                 let mut got = vec![None; rays.len()];
                 for (r, h) in rays.chunks(chunk).zip(got.chunks_mut(chunk)) {
@@ -276,21 +319,29 @@ mod tests {
         }
     }
 
-    /// `closest_streams_where_shared` as its callers run it.
+    /// `closest_streams_where_shared` as its callers run it, unshared
+    /// batches one ray at a time.
     fn where_shared(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
         // SAFETY: the tests call this only after `avx_or_skip`.
-        unsafe { bvh.closest_streams_where_shared(rays, hits) }
+        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single) }
     }
 
-    /// Whether the first full stream of `rays` shares its nodes (`None`:
-    /// the batch has no full stream).
-    fn first_shared(bvh: &WideBvh<8>, rays: &[Ray]) -> Option<bool> {
+    /// `where_shared`, unshared batches interleaved.
+    fn where_shared_else_interleaved(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        // SAFETY: as above.
+        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Interleaved) }
+    }
+
+    /// Whether the first full stream of `rays` shares its nodes enough to
+    /// stream rather than go the way `otherwise` says (`None`: the batch
+    /// has no full stream).
+    fn first_shared(bvh: &WideBvh<8>, rays: &[Ray], otherwise: Unshared) -> Option<bool> {
         let (which, oct) = first_full_stream(rays)?;
         let mut hits = vec![None; rays.len()];
         let mut work = StreamWork::default();
         // SAFETY: as above.
         unsafe { bvh.closest_stream(rays, &which, oct, &mut hits, &mut work) };
-        Some(work.shared())
+        Some(work.shared(otherwise))
     }
 
     /// On a bench scene, a tile's diffuse rays share their nodes and random
@@ -307,13 +358,17 @@ mod tests {
         let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
         let random = crate::accel::workloads::random_rays(&scene, 8192, 2);
         let (d, r) = (&diffuse[..1024], &random[..1024]);
-        assert_eq!(first_shared(&bvh, d), Some(true), "a tile's diffuse rays do not share their nodes");
-        assert_eq!(first_shared(&bvh, r), Some(false), "random rays share their nodes");
+        for otherwise in [Unshared::Single, Unshared::Interleaved] {
+            assert_eq!(first_shared(&bvh, d, otherwise), Some(true), "{otherwise:?}: a tile's diffuse rays do not share their nodes");
+            assert_eq!(first_shared(&bvh, r, otherwise), Some(false), "{otherwise:?}: random rays share their nodes");
+        }
         for rays in [d, r] {
             let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
-            let mut got = vec![None; rays.len()];
-            where_shared(&bvh, rays, &mut got);
-            assert!(got == want, "hits differ from single rays");
+            for way in [where_shared, where_shared_else_interleaved] {
+                let mut got = vec![None; rays.len()];
+                way(&bvh, rays, &mut got);
+                assert!(got == want, "hits differ from single rays");
+            }
         }
     }
 

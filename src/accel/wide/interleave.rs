@@ -135,16 +135,29 @@ impl<const W: usize> WideBvh<W> {
     /// The CPU must have AVX2 (`self.policy.avx()`).
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_interleaved_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.closest_interleaved_except(rays, hits, |_| false);
+    }
+
+    /// `closest_interleaved_avx` of the rays but those that
+    /// `traced(index)`, whose hits are left as they are.
+    ///
+    /// # Safety
+    /// As `closest_interleaved_avx`.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn closest_interleaved_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], traced: impl Fn(usize) -> bool) {
         if self.tree.root == EMPTY {
             hits.fill(None);
             return;
         }
         let mut next = 0;
-        // The next valid ray, answering invalid ones on the way.
+        // The next valid ray not yet traced, answering invalid ones on the way.
         let mut take = |hits: &mut [Option<Hit>]| -> Option<usize> {
             while next < rays.len() {
                 let i = next;
                 next += 1;
+                if traced(i) {
+                    continue;
+                }
                 if rays[i].is_valid() {
                     return Some(i);
                 }

@@ -384,7 +384,7 @@ impl<const W: usize> Traversal for WideBvh<W> {
             return unsafe {
                 match self.policy.closest {
                     ClosestBatches::Streams => self.closest_streams(rays, hits),
-                    ClosestBatches::StreamsWhereShared => self.closest_streams_where_shared(rays, hits),
+                    ClosestBatches::StreamsWhereShared(otherwise) => self.closest_streams_where_shared(rays, hits, otherwise),
                     ClosestBatches::StreamsElseInterleaved if self.streams_pay(rays) => self.closest_streams(rays, hits),
                     ClosestBatches::Interleaved | ClosestBatches::StreamsElseInterleaved => self.closest_interleaved_avx(rays, hits),
                     ClosestBatches::Single => self.closest_batch_avx(rays, hits),

@@ -44,13 +44,24 @@ pub(super) enum ClosestBatches {
     /// In streams (`hit_stream`).
     Streams,
     /// In streams where the batch's first full stream shows its rays
-    /// sharing the nodes (`closest_streams_where_shared`), else one ray at
-    /// a time.
-    StreamsWhereShared,
+    /// sharing the nodes (`closest_streams_where_shared`), else the way
+    /// `Unshared` says.
+    StreamsWhereShared(Unshared),
     /// In streams where the batch's own rays start close together, else
     /// interleaved: a tree of middling size whose incoherent rays miss
     /// the nearer caches (`interleave_reach`).
     StreamsElseInterleaved,
+}
+
+/// How a closest-hit batch goes whose first stream's rays did not share
+/// its nodes (`ClosestBatches::StreamsWhereShared`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Unshared {
+    /// One ray at a time: the tree stays in the caches.
+    Single,
+    /// Interleaved: the tree is too large for the caches
+    /// (`InterleaveReach::All`; its camera rays interleave too).
+    Interleaved,
 }
 
 /// How coherent occlusion batches (`occluded_coherent`) go.
@@ -129,15 +140,14 @@ impl Policy {
         // `avx` implies `W` = 8, which streams need.
         let streams = avx;
         let closest = match options.batch {
-            // Twelve interleaved walkers, each prefetching the node it
-            // enters next, beat streams even on coherent batches where the
-            // tree is large enough to interleave: diffuse batches, native ÷
-            // Embree 4 in one run, 2 threads, streams / interleaved: sphere
-            // 1M 1.27-1.40 / 1.53-1.61, subdivided bunny 1.5M 1.00-1.34 /
-            // 1.43, sphere 5M 1.16-1.27 / 2.18, grass 2M 0.80 / 1.27-1.34.
-            BatchWay::Auto if interleave => ClosestBatches::Interleaved,
+            // Where the tree is large enough to interleave, a batch streams
+            // only where its first stream shares more than elsewhere
+            // (`hit_stream::SHARED_OVER_INTERLEAVED`): twelve interleaved
+            // walkers, each prefetching the node it enters next, overlap
+            // the misses a stream would share.
+            BatchWay::Auto if interleave => ClosestBatches::StreamsWhereShared(Unshared::Interleaved),
             BatchWay::Auto if reach == InterleaveReach::Incoherent => ClosestBatches::StreamsElseInterleaved,
-            BatchWay::Auto if streams => ClosestBatches::StreamsWhereShared,
+            BatchWay::Auto if streams => ClosestBatches::StreamsWhereShared(Unshared::Single),
             BatchWay::Streams if streams => ClosestBatches::Streams,
             BatchWay::Interleaved if avx => ClosestBatches::Interleaved,
             _ => ClosestBatches::Single,
@@ -167,7 +177,7 @@ impl Policy {
 
     /// Whether camera batches (`intersect_coherent`: 16 neighbouring
     /// pixels after each other) go interleaved rather than in 16-ray
-    /// packets (`frustum`): where the incoherent batches do. On a tree too
+    /// packets (`frustum`): where the unshared closest-hit batches do. On a tree too
     /// large for the caches whose triangles are small beside a packet's
     /// footprint, a packet's leaves are entered by one or two of its rays
     /// each and its single chain of node fetches waits on memory, where
@@ -181,7 +191,7 @@ impl Policy {
     /// from 0.76 to 1.13.
     #[inline(always)]
     pub(super) fn camera_interleaved(&self) -> bool {
-        self.closest == ClosestBatches::Interleaved
+        matches!(self.closest, ClosestBatches::Interleaved | ClosestBatches::StreamsWhereShared(Unshared::Interleaved))
     }
 
     /// Whether the AVX-512 packet kernels run (the CPU has AVX-512F).
@@ -198,7 +208,8 @@ impl Policy {
             ClosestBatches::Single => "closest hits one by one",
             ClosestBatches::Interleaved => "closest hits interleaved (camera rays too)",
             ClosestBatches::Streams => "closest-hit streams",
-            ClosestBatches::StreamsWhereShared => "closest-hit streams where shared",
+            ClosestBatches::StreamsWhereShared(Unshared::Single) => "closest-hit streams where shared",
+            ClosestBatches::StreamsWhereShared(Unshared::Interleaved) => "closest-hit streams where shared, else interleaved (camera rays interleaved)",
             ClosestBatches::StreamsElseInterleaved => "closest-hit streams where coherent, else interleaved",
         };
         let shadows = match self.shadows {
