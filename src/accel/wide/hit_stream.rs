@@ -143,13 +143,7 @@ impl<const W: usize> WideBvh<W> {
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_streams_where_shared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared) {
         debug_assert!(W == 8);
-        // On trees too large for the caches the first stream itself costs
-        // (its fetches miss, one after another, where interleaved rays
-        // overlap theirs), so it is traced only where the batch's rays start
-        // close together and could share.
-        let unlikely = otherwise == Unshared::Interleaved && !self.streams_pay(rays);
-        let first = if unlikely || rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY { None } else { first_full_stream(rays) };
-        let Some((which, oct)) = first else {
+        let Some((which, oct)) = self.first_stream_to_try(rays, otherwise) else {
             return self.closest_unshared(rays, hits, otherwise, |_| false);
         };
         hits.fill(None);
@@ -166,6 +160,20 @@ impl<const W: usize> WideBvh<W> {
         } else {
             self.closest_unshared(rays, hits, otherwise, |i| i <= last && rays[i].is_valid() && octant(rays[i].dir) == oct);
         }
+    }
+
+    /// The first full stream of `rays` and its octant, where
+    /// `closest_streams_where_shared` tries one. On trees too large for
+    /// the caches the first stream itself costs (its fetches miss, one
+    /// after another, where interleaved rays overlap theirs), so it is
+    /// tried there only where the batch's rays start close together and
+    /// could share (`streams_pay`).
+    fn first_stream_to_try(&self, rays: &[Ray], otherwise: Unshared) -> Option<([u32; STREAM], usize)> {
+        let unlikely = otherwise == Unshared::Interleaved && !self.streams_pay(rays);
+        if unlikely || rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
+            return None;
+        }
+        first_full_stream(rays)
     }
 
     /// The rays of a batch but those that `traced(index)`, the way
@@ -300,10 +308,11 @@ mod tests {
         assert!(want.iter().filter(|h| h.is_some()).count() > 1000 && want.iter().filter(|h| h.is_none()).count() > 1000);
         let bvh = WideBvh::<8>::build(&shapes);
         // Batches of 777 take both ways (the test rays come in runs of
-        // coherent and random rays).
-        for otherwise in [Unshared::Single, Unshared::Interleaved] {
+        // coherent and random rays; where the other way is interleaving,
+        // random runs try no stream).
+        for (otherwise, unshared) in [(Unshared::Single, Some(false)), (Unshared::Interleaved, None)] {
             let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r, otherwise)).collect();
-            assert!(ways.contains(&Some(true)) && ways.contains(&Some(false)), "{otherwise:?}: batches of 777 take one way only: {ways:?}");
+            assert!(ways.contains(&Some(true)) && ways.contains(&unshared), "{otherwise:?}: batches of 777 take one way only: {ways:?}");
         }
         type Way = fn(&WideBvh<8>, &[Ray], &mut [Option<Hit>]);
         let ways = [("streams", streams as Way), ("streams where shared, else single", where_shared as Way), ("streams where shared, else interleaved", where_shared_else_interleaved as Way)];
@@ -334,9 +343,9 @@ mod tests {
 
     /// Whether the first full stream of `rays` shares its nodes enough to
     /// stream rather than go the way `otherwise` says (`None`: the batch
-    /// has no full stream).
+    /// tries no stream).
     fn first_shared(bvh: &WideBvh<8>, rays: &[Ray], otherwise: Unshared) -> Option<bool> {
-        let (which, oct) = first_full_stream(rays)?;
+        let (which, oct) = bvh.first_stream_to_try(rays, otherwise)?;
         let mut hits = vec![None; rays.len()];
         let mut work = StreamWork::default();
         // SAFETY: as above.
@@ -345,8 +354,9 @@ mod tests {
     }
 
     /// On a bench scene, a tile's diffuse rays share their nodes and random
-    /// rays do not (the two ways the rule takes), and either way the batch
-    /// finds the single-ray hits.
+    /// rays do not, or where the other way is interleaving do not try a
+    /// stream (the ways the rule takes), and either way the batch finds the
+    /// single-ray hits.
     #[test]
     fn the_first_stream_chooses_the_way() {
         if !avx_or_skip("the closest-hit streams") {
@@ -360,8 +370,9 @@ mod tests {
         let (d, r) = (&diffuse[..1024], &random[..1024]);
         for otherwise in [Unshared::Single, Unshared::Interleaved] {
             assert_eq!(first_shared(&bvh, d, otherwise), Some(true), "{otherwise:?}: a tile's diffuse rays do not share their nodes");
-            assert_eq!(first_shared(&bvh, r, otherwise), Some(false), "{otherwise:?}: random rays share their nodes");
         }
+        assert_eq!(first_shared(&bvh, r, Unshared::Single), Some(false), "random rays share their nodes");
+        assert_eq!(first_shared(&bvh, r, Unshared::Interleaved), None, "random rays try a stream where the other way is interleaving");
         for rays in [d, r] {
             let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
             for way in [where_shared, where_shared_else_interleaved] {
