@@ -1,7 +1,8 @@
 //! Incoherent closest-hit batches over structures whose rays miss the
 //! core's caches traced `IN_FLIGHT` rays at a time, step by step in turn, so
 //! one ray's node fetch overlaps the other rays' box and triangle tests
-//! (on large structures, every closest-hit batch: `interleave_reach`).
+//! (on large structures, camera batches and the batches whose first
+//! stream's rays do not share its nodes: `interleave_reach`, `hit_stream`).
 //!
 //! On the 1M-triangle mesh, random rays spent 42 % of their samples on the
 //! instruction after a node load: a lone ray's traversal is a chain of
@@ -73,7 +74,10 @@ const IN_FLIGHT: usize = 12;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum InterleaveReach {
     None,
+    /// Batches whose rays do not start close together.
     Incoherent,
+    /// Camera batches too, and every closest-hit batch but those whose
+    /// first stream's rays share its nodes (`hit_stream`).
     All,
 }
 
@@ -115,7 +119,7 @@ impl Walker {
 impl<const W: usize> WideBvh<W> {
     /// Which closest-hit batches gain from interleaving on this tree: none
     /// where it is small or its rays are expected to stay in the caches;
-    /// every batch where it is large (`INTERLEAVE_BYTES`); the incoherent
+    /// every kind where it is large (`INTERLEAVE_BYTES`, `All`); the incoherent
     /// ones in between (`INTERLEAVE_INCOHERENT_BYTES`).
     pub(super) fn interleave_reach(&self) -> InterleaveReach {
         use super::Traversal;

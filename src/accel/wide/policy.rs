@@ -177,8 +177,8 @@ impl Policy {
 
     /// Whether camera batches (`intersect_coherent`: 16 neighbouring
     /// pixels after each other) go interleaved rather than in 16-ray
-    /// packets (`frustum`): where the unshared closest-hit batches do. On a tree too
-    /// large for the caches whose triangles are small beside a packet's
+    /// packets (`frustum`): where the unshared closest-hit batches do. On a
+    /// tree too large for the caches whose triangles are small beside a packet's
     /// footprint, a packet's leaves are entered by one or two of its rays
     /// each and its single chain of node fetches waits on memory, where
     /// twelve walkers overlap their fetches. Camera Mrays/s, native ÷

@@ -151,8 +151,8 @@ pub(super) const STREAM_MIN_BYTES: usize = 16 << 20;
 
 /// Which way a tree's occlusion batches go is fixed when it is built
 /// (`Policy::shadows`): streams where its rays are expected to
-/// miss the caches (the test that interleaves every closest-hit batch,
-/// `interleave_reach`), packets elsewhere. Neither way wins
+/// miss the caches (the test that interleaves camera rays and unshared
+/// closest-hit batches, `interleave_reach`), packets elsewhere. Neither way wins
 /// everywhere, and that test separates them (1 thread, shadow Mrays/s,
 /// packets / streams, 2-vCPU AMD EPYC, 2026-11-28): sphere:1M 4.35 / 6.39,
 /// sphere:5M 2.30 / 3.41, subdiv:bunny:1.5M 3.73 / 5.21, grass:500k
