@@ -169,8 +169,11 @@ impl<const W: usize> WideBvh<W> {
     /// tried there only where the batch's rays start close together and
     /// could share (`streams_pay`).
     fn first_stream_to_try(&self, rays: &[Ray], otherwise: Unshared) -> Option<([u32; STREAM], usize)> {
-        let unlikely = otherwise == Unshared::Interleaved && !self.streams_pay(rays);
-        if unlikely || rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
+        // The constant-time checks first; the origin rule is a pass over the batch.
+        if rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
+            return None;
+        }
+        if otherwise == Unshared::Interleaved && !self.streams_pay(rays) {
             return None;
         }
         first_full_stream(rays)
