@@ -8,7 +8,8 @@
 //! ```
 //! SCENE is a bench scene name or file; BACKEND a `--backend` value; KIND
 //! `camera`, `shadow`, `random` or `diffuse` (the bench's rays and batch
-//! calls; diffuse rays leave the camera rays' hits in 32x32 tiles). The
+//! calls; diffuse rays leave the camera rays' hits in 32x32 tiles), or
+//! `random1` / `diffuse1`: the same rays one call each (`intersect`). The
 //! `PATHTRACER_NATIVE_*` switches apply as they do to `pathtracer`.
 
 use clap::ValueEnum;
@@ -28,7 +29,7 @@ fn main() {
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [scene, backend, kind, seconds] = args.as_slice() else {
-        return Err("usage: trace_rays SCENE BACKEND camera|shadow|random|diffuse SECONDS".into());
+        return Err("usage: trace_rays SCENE BACKEND camera|shadow|random|diffuse|random1|diffuse1 SECONDS".into());
     };
     let backend = BackendKind::from_str(backend, true)?;
     let seconds: f64 = seconds.parse().map_err(|_| format!("SECONDS: not a number: {seconds}"))?;
@@ -39,12 +40,16 @@ fn run() -> Result<(), String> {
     let n = 1 << 20;
     let mut cam = Camera::from_scene(&scene);
     cam.set_screen_size(1024, 1024);
-    let rays = match kind.as_str() {
+    let (set, one_call) = match kind.strip_suffix('1') {
+        Some(set @ ("random" | "diffuse")) => (set, true),
+        _ => (kind.as_str(), false),
+    };
+    let rays = match set {
         "camera" => camera_rays(&cam, 1024, 1024),
         "shadow" => shadow_rays(&scene, accel, &camera_rays(&cam, 1024, 1024)),
         "random" => random_rays(&scene, n, 1),
         "diffuse" => diffuse_rays(&scene, accel, &tile_order(&camera_rays(&cam, 1024, 1024), 1024, 1024, 32), 7),
-        k => return Err(format!("KIND: camera, shadow, random or diffuse, not {k}")),
+        _ => return Err(format!("KIND: camera, shadow, random, diffuse, random1 or diffuse1, not {kind}")),
     };
     let start = Instant::now();
     let (mut traced, mut hits) = (0usize, 0usize);
@@ -56,7 +61,11 @@ fn run() -> Result<(), String> {
                 hits += out.iter().filter(|&&o| o).count();
             } else {
                 let mut out = vec![None; chunk.len()];
-                if kind == "camera" {
+                if one_call {
+                    for (ray, hit) in chunk.iter().zip(&mut out) {
+                        *hit = accel.intersect(ray);
+                    }
+                } else if kind == "camera" {
                     accel.intersect_coherent(chunk, &mut out);
                 } else {
                     accel.intersect_batch(chunk, &mut out);
