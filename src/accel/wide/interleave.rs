@@ -1,8 +1,9 @@
 //! Incoherent closest-hit batches over structures whose rays miss the
 //! core's caches traced `IN_FLIGHT` rays at a time, step by step in turn, so
 //! one ray's node fetch overlaps the other rays' box and triangle tests
-//! (on large structures, camera batches and the batches whose first
-//! stream's rays do not share its nodes: `interleave_reach`, `hit_stream`).
+//! (on large structures, the batches whose first stream's rays do not
+//! share its nodes: `interleave_reach`, `hit_stream`; camera batches go in
+//! packets on every tree, `frustum`).
 //!
 //! On the 1M-triangle mesh, random rays spent 42 % of their samples on the
 //! instruction after a node load: a lone ray's traversal is a chain of
@@ -76,8 +77,8 @@ pub(super) enum InterleaveReach {
     None,
     /// Batches whose rays do not start close together.
     Incoherent,
-    /// Camera batches too, and every closest-hit batch but those whose
-    /// first stream's rays share its nodes (`hit_stream`).
+    /// Every closest-hit batch but those whose first stream's rays share
+    /// its nodes (`hit_stream`).
     All,
 }
 

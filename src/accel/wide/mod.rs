@@ -407,11 +407,6 @@ impl<const W: usize> Traversal for WideBvh<W> {
     fn intersect_coherent(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), hits.len());
         #[cfg(target_arch = "x86_64")]
-        if self.policy.camera_interleaved() && self.policy.avx() {
-            // SAFETY: the policy has AVX2 box tests only where the CPU has AVX2.
-            return unsafe { self.closest_interleaved_avx(rays, hits) };
-        }
-        #[cfg(target_arch = "x86_64")]
         if self.policy.avx512() {
             // SAFETY: the policy has AVX-512 packets only where the CPU has AVX2 and AVX-512F.
             return unsafe { self.closest_coherent_avx512(rays, hits) };

@@ -60,7 +60,7 @@ pub(super) enum Unshared {
     /// One ray at a time: the tree stays in the caches.
     Single,
     /// Interleaved: the tree is too large for the caches
-    /// (`InterleaveReach::All`; its camera rays interleave too).
+    /// (`InterleaveReach::All`).
     Interleaved,
 }
 
@@ -175,25 +175,6 @@ impl Policy {
         self.boxes == BoxIsa::Avx2
     }
 
-    /// Whether camera batches (`intersect_coherent`: 16 neighbouring
-    /// pixels after each other) go interleaved rather than in 16-ray
-    /// packets (`frustum`): where the unshared closest-hit batches do. On a
-    /// tree too large for the caches whose triangles are small beside a packet's
-    /// footprint, a packet's leaves are entered by one or two of its rays
-    /// each and its single chain of node fetches waits on memory, where
-    /// twelve walkers overlap their fetches. Camera Mrays/s, native ÷
-    /// Embree 4 in one run (2-vCPU AMD EPYC, Zen 3, AVX2; two runs each, 1
-    /// thread, and 2 threads where given), packets / interleaved: grass 2M
-    /// 0.76-0.81 / 1.40-1.41, grass 500k 0.97-1.05 / 1.13-1.26, sphere 5M
-    /// 0.94-0.96 / 1.32-1.33, sphere 2M 0.98-1.05 / 1.15-1.45, sphere 1M
-    /// 1.14-1.36 / 1.13-1.30, subdivided bunny 1.5M 1.19-1.36 / 1.16-1.37,
-    /// subdivided CBbunny 1M 1.30-1.47 / 1.15-1.21: the lowest cell rises
-    /// from 0.76 to 1.13.
-    #[inline(always)]
-    pub(super) fn camera_interleaved(&self) -> bool {
-        matches!(self.closest, ClosestBatches::Interleaved | ClosestBatches::StreamsWhereShared(Unshared::Interleaved))
-    }
-
     /// Whether the AVX-512 packet kernels run (the CPU has AVX-512F).
     #[inline(always)]
     pub(super) fn avx512(&self) -> bool {
@@ -206,10 +187,10 @@ impl Policy {
         let isa = isa_words(self.avx(), self.avx512());
         let closest = match self.closest {
             ClosestBatches::Single => "closest hits one by one",
-            ClosestBatches::Interleaved => "closest hits interleaved (camera rays too)",
+            ClosestBatches::Interleaved => "closest hits interleaved",
             ClosestBatches::Streams => "closest-hit streams",
             ClosestBatches::StreamsWhereShared(Unshared::Single) => "closest-hit streams where shared",
-            ClosestBatches::StreamsWhereShared(Unshared::Interleaved) => "closest-hit streams where shared, else interleaved (camera rays interleaved)",
+            ClosestBatches::StreamsWhereShared(Unshared::Interleaved) => "closest-hit streams where shared, else interleaved",
             ClosestBatches::StreamsElseInterleaved => "closest-hit streams where coherent, else interleaved",
         };
         let shadows = match self.shadows {

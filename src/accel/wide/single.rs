@@ -48,11 +48,19 @@ impl<const W: usize> WideBvh<W> {
     /// makes them for 16 rays at once); the tree is not empty.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn walk_set_up<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, rt: &RayTransform, shear: &Shear, slab: &Slab, order: ChildOrder, work: &mut u32, mut visit: F) {
+    fn walk_set_up<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, ray: &Ray, rt: &RayTransform, shear: &Shear, slab: &Slab, order: ChildOrder, work: &mut u32, visit: F) {
+        self.walk_from::<AVX, ANY, F>(self.tree.root, ray, rt, shear, slab, order, work, visit)
+    }
+
+    /// `walk_set_up` of the subtree at `start` (a node's or a leaf's code)
+    /// instead of the whole tree.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn walk_from<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, start: u32, ray: &Ray, rt: &RayTransform, shear: &Shear, slab: &Slab, order: ChildOrder, work: &mut u32, mut visit: F) {
         let mut tmax = ray.tmax;
         let mut stack = WalkStack::<()>::new();
         let mut sp = 0;
-        let mut cur = self.tree.root;
+        let mut cur = start;
         loop {
             if cur & LEAF_BIT != 0 {
                 let leaf = self.leaf_of(cur);
@@ -135,6 +143,31 @@ impl<const W: usize> WideBvh<W> {
             false
         });
         best
+    }
+
+    /// `walk_set_up` over the subtrees `roots` in turn, each given with a
+    /// lower bound of the ray's entry distance (one beyond the ray's range
+    /// by then is skipped, as a popped stack entry is): how a packet that
+    /// gives up hands each ray the subtrees it had still to visit
+    /// (`frustum`), instead of the whole tree again.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn walk_subtrees<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, roots: impl Iterator<Item = (u32, f32)>, ray: &Ray, rt: &RayTransform, shear: &Shear, slab: &Slab, order: ChildOrder, mut visit: F) {
+        let mut tmax = ray.tmax;
+        for (code, near) in roots {
+            if near > tmax * crate::accel::bvh::ROBUST_SCALE {
+                continue;
+            }
+            let mut stop = false;
+            self.walk_from::<AVX, ANY, _>(code, &Ray { tmax, ..*ray }, rt, shear, slab, order, &mut 0, |h, t| {
+                stop = visit(h, t);
+                tmax = *t;
+                stop
+            });
+            if stop {
+                return;
+            }
+        }
     }
 
     /// `closest_all` of a batch whose rays are set up 16 at a time in one

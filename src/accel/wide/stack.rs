@@ -75,6 +75,19 @@ impl<M: Copy> WalkStack<M> {
     }
 }
 
+impl<M: Copy> WalkStack<M> {
+    /// The entries below the height `sp`, top first: each child's code and
+    /// entry distance.
+    #[inline(always)]
+    pub(super) fn pending(&self, sp: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
+        // SAFETY: every entry below the height was written.
+        self.entries[..sp].iter().rev().map(|e| {
+            let (code, near, _) = unsafe { e.assume_init() };
+            (code, near)
+        })
+    }
+}
+
 impl WalkStack<()> {
     /// Pop until a child whose entry distance is within `tmax` (a subtree
     /// starting beyond it cannot hold a closer hit); `None` when the stack
