@@ -59,7 +59,7 @@ use std::mem::MaybeUninit;
 /// go deep and stay tight. The rays of a packet that gives up go on from
 /// the subtrees it had still to visit, not from the root: camera rays, one
 /// process, subtrees ÷ root 1.035-1.07 on the subdivided bunny 1.5M, sphere
-/// 1M and 5M and grass 2M (1 packet in 30-600 gives up), arch 2M 0.98.
+/// 1M and 5M and grass 2M (1 packet in 35-310 gives up), arch 2M 0.98.
 pub(super) const WASTED_LEAF_TESTS: u32 = 32;
 
 /// Camera packets traced as frusta on this thread (tests check which way

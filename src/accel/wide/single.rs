@@ -155,7 +155,7 @@ impl<const W: usize> WideBvh<W> {
     pub(super) fn walk_subtrees<const AVX: bool, const ANY: bool, F: FnMut(Hit, &mut f32) -> bool>(&self, roots: impl Iterator<Item = (u32, f32)>, ray: &Ray, rt: &RayTransform, shear: &Shear, slab: &Slab, order: ChildOrder, mut visit: F) {
         let mut tmax = ray.tmax;
         for (code, near) in roots {
-            if near > tmax * crate::accel::bvh::ROBUST_SCALE {
+            if !super::stack::may_hold_closer(near, tmax) {
                 continue;
             }
             let mut stop = false;

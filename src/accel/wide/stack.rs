@@ -73,9 +73,7 @@ impl<M: Copy> WalkStack<M> {
         }
         None
     }
-}
 
-impl<M: Copy> WalkStack<M> {
     /// The entries below the height `sp`, top first: each child's code and
     /// entry distance.
     #[inline(always)]
@@ -88,15 +86,21 @@ impl<M: Copy> WalkStack<M> {
     }
 }
 
+/// Whether a subtree entered at `near` may hold a hit closer than `tmax`:
+/// scaled as the box tests scale it (`Slab::test`), so rounding never culls
+/// a subtree the ray enters.
+#[inline(always)]
+pub(super) fn may_hold_closer(near: f32, tmax: f32) -> bool {
+    near <= tmax * crate::accel::bvh::ROBUST_SCALE
+}
+
 impl WalkStack<()> {
     /// Pop until a child whose entry distance is within `tmax` (a subtree
     /// starting beyond it cannot hold a closer hit); `None` when the stack
     /// runs out.
     #[inline(always)]
     pub(super) fn pop_within(&self, sp: &mut usize, tmax: f32) -> Option<u32> {
-        // Scaled as the box tests scale it (`Slab::test`).
-        let limit = tmax * crate::accel::bvh::ROBUST_SCALE;
-        self.pop_where(sp, |near, ()| (near <= limit).then_some(())).map(|(code, ())| code)
+        self.pop_where(sp, |near, ()| may_hold_closer(near, tmax).then_some(())).map(|(code, ())| code)
     }
 }
 
