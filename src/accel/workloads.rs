@@ -6,6 +6,7 @@
 
 use crate::accel::{Hit, Traversal};
 use crate::camera::Camera;
+use crate::geometry::Aabb;
 use crate::ray::Ray;
 use crate::rng::Rng;
 use crate::scene::Scene;
@@ -26,7 +27,11 @@ pub fn camera_rays(camera: &Camera, w: u32, h: u32) -> Vec<Ray> {
 /// Incoherent rays: origins uniform in the scene bounds grown by 10 % on
 /// every side (so some start outside), directions uniform on the sphere.
 pub fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
-    let b = scene.bounds();
+    random_rays_in(&scene.bounds(), n, seed)
+}
+
+/// `random_rays` about the box `b`.
+pub fn random_rays_in(b: &Aabb, n: usize, seed: u64) -> Vec<Ray> {
     let grow = b.extent() * 0.1 + Vec3::splat(1e-3);
     let (lo, size) = (b.min - grow, b.extent() + 2.0 * grow);
     let mut rng = Rng::new(seed, 0xB0B);

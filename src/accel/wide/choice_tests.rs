@@ -71,7 +71,8 @@ fn interleaving_reaches_incoherent_batches_on_middling_trees() {
         }
         if b.policy.avx() {
             let way = match want {
-                InterleaveReach::None => policy::ClosestBatches::StreamsWhereShared(policy::Unshared::Single),
+                // SAFETY: `avx()` says the CPU has AVX2.
+                InterleaveReach::None => policy::ClosestBatches::StreamsWhereShared(policy::Unshared::Single(unsafe { b.scattered_batches() })),
                 InterleaveReach::Incoherent => policy::ClosestBatches::StreamsElseInterleaved,
                 InterleaveReach::All => policy::ClosestBatches::StreamsWhereShared(policy::Unshared::Interleaved),
             };
@@ -218,3 +219,4 @@ fn camera_batches_go_in_packets_where_incoherent_ones_interleave() {
         assert_eq!(bad, 0, "{spec}: camera batch hits differ from single rays");
     }
 }
+

@@ -14,17 +14,19 @@
 //! interleaved on trees too large for the caches, where the stream must
 //! share more to pay; on trees of middling size whose rays miss the
 //! nearer caches, those whose origins lie close together (`streams_pay`,
-//! else interleaved).
+//! else interleaved). A batch whose rays start far apart tries no first
+//! stream on a tree where streams of such rays were seen to fall well
+//! short when it was built (`scattered_batches`).
 //!
 //! Answers equal single-ray traversal's: each ray tests every triangle
 //! whose leaf box it enters within its current closest distance, with the
 //! watertight test and the same tie-break (`closer`), so its closest hit is
 //! the same whatever order the leaves come in.
 
-use super::stream::{octant, octant_planes, octant_streams, octant_streams_until, ready, StreamRays, STREAM};
+use super::stream::{octant_planes, octant_streams, octant_streams_until, ready, FirstStream, StreamRays, STREAM};
 use super::triangle::Shear;
 use super::stack::WalkStack;
-use super::policy::Unshared;
+use super::policy::{Scattered, Unshared};
 use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::prims::closer;
 use crate::accel::Hit;
@@ -64,6 +66,30 @@ const SHARED: (u64, u64) = (9, 2);
 /// cost sphere 5M's random rays 5-11 %.
 const SHARED_OVER_INTERLEAVED: (u64, u64) = (6, 1);
 
+/// A batch's rays start far apart when the mean distance between
+/// consecutive origins, over its first `SCATTER_STEPS` steps, is at least
+/// this share of the tree's diagonal. Rays from anywhere in a box step
+/// about 0.4 of its diagonal; a tile's bounce rays a small fraction.
+const SCATTERED_STEP: f32 = 1.0 / 8.0;
+
+/// Steps between origins read to judge a batch scattered: a pass over the
+/// whole batch cost 3 % of cow's random batches.
+const SCATTER_STEPS: usize = 64;
+
+/// Rays of the tree's sample that decides whether scattered batches try a
+/// first stream (`scattered_batches`).
+const SCATTER_SAMPLE: usize = 2048;
+
+/// Scattered batches try a first stream on trees where streams of rays
+/// from anywhere in the box made at least 3/4 of `SHARED`'s tests per
+/// fetch. Measured from 2048 such rays (tests per fetch): CBbunny 5.79,
+/// arch:2M 5.76, where random batches stream for 11-13 %; beetle 2.81, cow
+/// 2.66, stadium:2M 2.50, maxplanck 2.06, whose random batches' first
+/// streams are always refused (the probe cost cow's random batches 2.6 %
+/// against one ray at a time, in one process). The same rays' streams read
+/// within 5 % at 512 and 8192 rays but on arch (6.82 at 512).
+const SCATTERED_MAY_SHARE: (u64, u64) = (27, 8);
+
 /// What a stream did: nodes fetched, and ray-node tests made at them.
 #[derive(Default)]
 struct StreamWork {
@@ -77,7 +103,7 @@ impl StreamWork {
     /// `SHARED_OVER_INTERLEAVED`).
     fn shared(&self, otherwise: Unshared) -> bool {
         let (num, den) = match otherwise {
-            Unshared::Single => SHARED,
+            Unshared::Single(_) => SHARED,
             Unshared::Interleaved => SHARED_OVER_INTERLEAVED,
         };
         self.tests * den >= self.nodes * num
@@ -105,16 +131,70 @@ impl<const W: usize> WideBvh<W> {
         if rays.len() < STREAM_MIN_RAYS {
             return false;
         }
+        // A batch of n rays has at most n - 1 steps: once the sum reaches
+        // what they may add up to, no rest of the batch can bring the mean
+        // under the bar (a scattered batch stops after about 1/16 of it).
+        let limit = (rays.len() - 1) as f32 * COHERENT_STEP * self.tree.root_diagonal;
         let (mut sum, mut steps) = (0.0f32, 0u32);
         let mut prev: Option<glam::Vec3> = None;
         for r in rays.iter().filter(|r| r.is_valid()) {
             if let Some(p) = prev {
                 sum += (r.origin - p).length();
                 steps += 1;
+                if sum >= limit {
+                    return false;
+                }
             }
             prev = Some(r.origin);
         }
         steps as usize >= STREAM_MIN_RAYS && sum < steps as f32 * COHERENT_STEP * self.tree.root_diagonal
+    }
+
+    /// Whether the rays of a batch start far apart (`SCATTERED_STEP`),
+    /// judged from its first valid rays alone.
+    pub(super) fn origins_scattered(&self, rays: &[Ray]) -> bool {
+        let (mut sum, mut steps) = (0.0f32, 0usize);
+        let mut prev: Option<glam::Vec3> = None;
+        for r in rays.iter().filter(|r| r.is_valid()) {
+            if let Some(p) = prev {
+                sum += (r.origin - p).length();
+                steps += 1;
+                if steps == SCATTER_STEPS {
+                    break;
+                }
+            }
+            prev = Some(r.origin);
+        }
+        steps > 0 && sum >= steps as f32 * SCATTERED_STEP * self.tree.root_diagonal
+    }
+
+    /// Whether scattered batches try a first stream on this tree
+    /// (`SCATTERED_MAY_SHARE`): counted over streams of `SCATTER_SAMPLE`
+    /// rays from anywhere in the tree's box (as the benchmark's random
+    /// rays), fixed seed, so the same tree always decides the same.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2; `W` must be 8.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn scattered_batches(&self) -> Scattered {
+        if self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
+            return Scattered::Single;
+        }
+        let rays = crate::accel::workloads::random_rays_in(&self.tree.bounds, SCATTER_SAMPLE, 0x5CA7);
+        let mut hits = vec![None; rays.len()];
+        let mut work = StreamWork::default();
+        octant_streams_until(&rays, |_, _| false, |which, oct| {
+            if which.len() == STREAM {
+                self.closest_stream(&rays, which, oct, &mut hits, &mut work);
+            }
+            true
+        });
+        let (num, den) = SCATTERED_MAY_SHARE;
+        if work.tests * den >= work.nodes * num {
+            Scattered::TryStream
+        } else {
+            Scattered::Single
+        }
     }
 
     /// `hits[i]` = the closest hit of `rays[i]`, in streams of up to
@@ -144,21 +224,21 @@ impl<const W: usize> WideBvh<W> {
     pub(super) unsafe fn closest_streams_where_shared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared) {
         debug_assert!(W == 8);
         let Some((which, oct)) = self.first_stream_to_try(rays, otherwise) else {
-            return self.closest_unshared(rays, hits, otherwise, |_| false);
+            return self.closest_unshared(rays, hits, otherwise, None);
         };
         hits.fill(None);
         let mut work = StreamWork::default();
         self.closest_stream(rays, &which, oct, hits, &mut work);
         // The first stream: the valid rays of octant `oct` up to `last`.
-        let last = which[STREAM - 1] as usize;
-        let traced = |i: usize, o: usize| o == oct && i <= last;
+        let first = FirstStream { last: which[STREAM - 1] as usize, oct };
+        let traced = |i: usize, o: usize| o == first.oct && i <= first.last;
         if work.shared(otherwise) {
             octant_streams_until(rays, traced, |which, oct| {
                 self.closest_stream(rays, which, oct, hits, &mut work);
                 true
             });
         } else {
-            self.closest_unshared(rays, hits, otherwise, |i| i <= last && rays[i].is_valid() && octant(rays[i].dir) == oct);
+            self.closest_unshared(rays, hits, otherwise, Some(first));
         }
     }
 
@@ -167,28 +247,35 @@ impl<const W: usize> WideBvh<W> {
     /// the caches the first stream itself costs (its fetches miss, one
     /// after another, where interleaved rays overlap theirs), so it is
     /// tried there only where the batch's rays start close together and
-    /// could share (`streams_pay`).
+    /// could share (`streams_pay`); elsewhere not where they start far
+    /// apart and the tree's rays from anywhere were seen not to share
+    /// (`Scattered::Single`).
     fn first_stream_to_try(&self, rays: &[Ray], otherwise: Unshared) -> Option<([u32; STREAM], usize)> {
         // The constant-time checks first; the origin rule is a pass over the batch.
         if rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
             return None;
         }
-        if otherwise == Unshared::Interleaved && !self.streams_pay(rays) {
+        let refused = match otherwise {
+            Unshared::Interleaved => !self.streams_pay(rays),
+            Unshared::Single(Scattered::Single) => self.origins_scattered(rays),
+            Unshared::Single(Scattered::TryStream) => false,
+        };
+        if refused {
             return None;
         }
         first_full_stream(rays)
     }
 
-    /// The rays of a batch but those that `traced(index)`, the way
+    /// The rays of a batch but those its first stream traced, the way
     /// `otherwise` says.
     ///
     /// # Safety
     /// As `closest_streams`.
     #[inline(always)]
-    unsafe fn closest_unshared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared, traced: impl Fn(usize) -> bool) {
+    unsafe fn closest_unshared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared, first: Option<FirstStream>) {
         match otherwise {
-            Unshared::Single => self.closest_batch_except(rays, hits, traced),
-            Unshared::Interleaved => self.closest_interleaved_except(rays, hits, traced),
+            Unshared::Single(_) => self.closest_batch_except(rays, hits, first),
+            Unshared::Interleaved => self.closest_interleaved_except(rays, hits, first),
         }
     }
 
@@ -313,12 +400,17 @@ mod tests {
         // Batches of 777 take both ways (the test rays come in runs of
         // coherent and random rays; where the other way is interleaving,
         // random runs try no stream).
-        for (otherwise, unshared) in [(Unshared::Single, Some(false)), (Unshared::Interleaved, None)] {
+        for (otherwise, unshared) in [(Unshared::Single(Scattered::TryStream), Some(false)), (Unshared::Single(Scattered::Single), None), (Unshared::Interleaved, None)] {
             let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r, otherwise)).collect();
             assert!(ways.contains(&Some(true)) && ways.contains(&unshared), "{otherwise:?}: batches of 777 take one way only: {ways:?}");
         }
         type Way = fn(&WideBvh<8>, &[Ray], &mut [Option<Hit>]);
-        let ways = [("streams", streams as Way), ("streams where shared, else single", where_shared as Way), ("streams where shared, else interleaved", where_shared_else_interleaved as Way)];
+        let ways = [
+            ("streams", streams as Way),
+            ("streams where shared, else single", where_shared as Way),
+            ("streams where shared, else and where scattered single", where_shared_unless_scattered as Way),
+            ("streams where shared, else interleaved", where_shared_else_interleaved as Way),
+        ];
         for (name, way) in ways {
             for chunk in [rays.len(), 4096, 777, 128, 127, 65, 64, 3, 1] {
                 let mut got = vec![None; rays.len()];
@@ -335,7 +427,14 @@ mod tests {
     /// batches one ray at a time.
     fn where_shared(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
         // SAFETY: the tests call this only after `avx_or_skip`.
-        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single) }
+        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::TryStream)) }
+    }
+
+    /// `where_shared`, batches whose rays start far apart one ray at a
+    /// time without a first stream.
+    fn where_shared_unless_scattered(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        // SAFETY: as above.
+        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::Single)) }
     }
 
     /// `where_shared`, unshared batches interleaved.
@@ -371,18 +470,53 @@ mod tests {
         let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
         let random = crate::accel::workloads::random_rays(&scene, 8192, 2);
         let (d, r) = (&diffuse[..1024], &random[..1024]);
-        for otherwise in [Unshared::Single, Unshared::Interleaved] {
+        let (try_stream, single) = (Unshared::Single(Scattered::TryStream), Unshared::Single(Scattered::Single));
+        for otherwise in [try_stream, single, Unshared::Interleaved] {
             assert_eq!(first_shared(&bvh, d, otherwise), Some(true), "{otherwise:?}: a tile's diffuse rays do not share their nodes");
         }
-        assert_eq!(first_shared(&bvh, r, Unshared::Single), Some(false), "random rays share their nodes");
+        assert!(!bvh.origins_scattered(d) && bvh.origins_scattered(r), "a tile's diffuse rays start far apart, or random rays do not");
+        assert_eq!(first_shared(&bvh, r, try_stream), Some(false), "random rays share their nodes");
+        assert_eq!(first_shared(&bvh, r, single), None, "random rays try a stream where scattered batches go one by one");
         assert_eq!(first_shared(&bvh, r, Unshared::Interleaved), None, "random rays try a stream where the other way is interleaving");
         for rays in [d, r] {
             let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
-            for way in [where_shared, where_shared_else_interleaved] {
+            for way in [where_shared, where_shared_unless_scattered, where_shared_else_interleaved] {
                 let mut got = vec![None; rays.len()];
                 way(&bvh, rays, &mut got);
                 assert!(got == want, "hits differ from single rays");
             }
+        }
+    }
+
+    /// Scattered batches skip the first stream only on trees where no
+    /// random batch's first stream would have shared its nodes (cow,
+    /// maxplanck, the stadium), and try it where some do (CBbunny, the
+    /// architecture scene): the choice made from the tree's own sample
+    /// (`scattered_batches`) agrees with the benchmark's random batches;
+    /// a tree built again chooses the same.
+    #[test]
+    fn scattered_batches_skip_the_first_stream_where_random_streams_do_not_share() {
+        if !avx_or_skip("the closest-hit streams") {
+            return;
+        }
+        let file = |name: &str| crate::scene::load_file(&crate::scene::generated::in_repository(name).unwrap()).unwrap();
+        let scenes = [("CBbunny", file("CBbunny")), ("cow", file("cow")), ("maxplanck", file("maxplanck")), ("arch:200k", load_bench_scene("arch:200k")), ("stadium:200k", load_bench_scene("stadium:200k"))];
+        for (name, scene) in scenes {
+            let bvh = WideBvh::<8>::build(&scene.shapes);
+            // SAFETY: after `avx_or_skip`.
+            let chosen = unsafe { bvh.scattered_batches() };
+            assert_eq!(bvh.policy.closest, ClosestBatches::StreamsWhereShared(Unshared::Single(chosen)), "{name}");
+            assert_eq!(unsafe { WideBvh::<8>::build(&scene.shapes).scattered_batches() }, chosen, "{name}: built again");
+            let random = crate::accel::workloads::random_rays(&scene, 4 * 4096, 9);
+            let probes: Vec<Option<bool>> = random.chunks(4096).map(|r| first_shared(&bvh, r, Unshared::Single(Scattered::TryStream))).collect();
+            // Where they try, the first stream still decides batch by batch.
+            let agrees = match chosen {
+                Scattered::TryStream => probes.contains(&Some(true)),
+                Scattered::Single => probes.iter().all(|p| *p == Some(false)),
+            };
+            assert!(agrees, "{name}: {chosen:?}, but the random batches' first streams say {probes:?}");
+            let expected = if name.starts_with("CBbunny") || name.starts_with("arch") { Scattered::TryStream } else { Scattered::Single };
+            assert_eq!(chosen, expected, "{name}");
         }
     }
 

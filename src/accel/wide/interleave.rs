@@ -140,16 +140,18 @@ impl<const W: usize> WideBvh<W> {
     /// The CPU must have AVX2 (`self.policy.avx()`).
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_interleaved_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        self.closest_interleaved_except(rays, hits, |_| false);
+        self.closest_interleaved_except(rays, hits, None);
     }
 
-    /// `closest_interleaved_avx` of the rays but those that
-    /// `traced(index)`, whose hits are left as they are.
+    /// `closest_interleaved_avx` of the rays but those that the batch's
+    /// `first` stream traced, whose hits are left as they are. Never
+    /// inlined: one compiled loop for every caller (`FirstStream`).
     ///
     /// # Safety
     /// As `closest_interleaved_avx`.
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn closest_interleaved_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], traced: impl Fn(usize) -> bool) {
+    #[inline(never)]
+    pub(super) unsafe fn closest_interleaved_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], first: Option<super::stream::FirstStream>) {
         if self.tree.root == EMPTY {
             hits.fill(None);
             return;
@@ -160,7 +162,7 @@ impl<const W: usize> WideBvh<W> {
             while next < rays.len() {
                 let i = next;
                 next += 1;
-                if traced(i) {
+                if super::stream::FirstStream::traced(first, rays, i) {
                     continue;
                 }
                 if rays[i].is_valid() {

@@ -57,11 +57,26 @@ pub(super) enum ClosestBatches {
 /// its nodes (`ClosestBatches::StreamsWhereShared`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Unshared {
-    /// One ray at a time: the tree stays in the caches.
-    Single,
+    /// One ray at a time: the tree stays in the caches. A batch whose rays
+    /// start far apart tries a first stream only as `Scattered` says.
+    Single(Scattered),
     /// Interleaved: the tree is too large for the caches
     /// (`InterleaveReach::All`).
     Interleaved,
+}
+
+/// Whether a closest-hit batch whose rays start far apart from one another
+/// (`WideBvh::origins_scattered`) tries a first stream, on a tree that
+/// stays in the caches; chosen when the tree is built
+/// (`WideBvh::scattered_batches`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Scattered {
+    /// It does: streams of rays from anywhere in the tree's box came near
+    /// to paying there.
+    TryStream,
+    /// It goes one ray at a time: such streams fell well short, and the
+    /// first stream would be refused after costing its rays twice over.
+    Single,
 }
 
 /// How coherent occlusion batches (`occluded_coherent`) go.
@@ -147,7 +162,8 @@ impl Policy {
             // the misses a stream would share.
             BatchWay::Auto if interleave => ClosestBatches::StreamsWhereShared(Unshared::Interleaved),
             BatchWay::Auto if reach == InterleaveReach::Incoherent => ClosestBatches::StreamsElseInterleaved,
-            BatchWay::Auto if streams => ClosestBatches::StreamsWhereShared(Unshared::Single),
+            // SAFETY: `streams` implies AVX2.
+            BatchWay::Auto if streams => ClosestBatches::StreamsWhereShared(Unshared::Single(unsafe { tree.scattered_batches() })),
             BatchWay::Streams if streams => ClosestBatches::Streams,
             BatchWay::Interleaved if avx => ClosestBatches::Interleaved,
             _ => ClosestBatches::Single,
@@ -189,7 +205,8 @@ impl Policy {
             ClosestBatches::Single => "closest hits one by one",
             ClosestBatches::Interleaved => "closest hits interleaved",
             ClosestBatches::Streams => "closest-hit streams",
-            ClosestBatches::StreamsWhereShared(Unshared::Single) => "closest-hit streams where shared",
+            ClosestBatches::StreamsWhereShared(Unshared::Single(Scattered::TryStream)) => "closest-hit streams where shared",
+            ClosestBatches::StreamsWhereShared(Unshared::Single(Scattered::Single)) => "closest-hit streams where shared, scattered batches one by one",
             ClosestBatches::StreamsWhereShared(Unshared::Interleaved) => "closest-hit streams where shared, else interleaved",
             ClosestBatches::StreamsElseInterleaved => "closest-hit streams where coherent, else interleaved",
         };

@@ -179,17 +179,19 @@ impl<const W: usize> WideBvh<W> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_batch_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        self.closest_batch_except(rays, hits, |_| false);
+        self.closest_batch_except(rays, hits, None);
     }
 
-    /// `closest_batch_avx` of the rays but those that `traced(index)`,
-    /// whose hits are left as they are.
+    /// `closest_batch_avx` of the rays but those that the batch's `first`
+    /// stream traced, whose hits are left as they are. Never inlined: one
+    /// compiled loop for every caller (`FirstStream`).
     ///
     /// # Safety
     /// The CPU must have AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn closest_batch_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], traced: impl Fn(usize) -> bool) {
+    #[inline(never)]
+    pub(super) unsafe fn closest_batch_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], first: Option<super::stream::FirstStream>) {
         if self.tree.root == EMPTY {
             hits.fill(None);
             return;
@@ -197,7 +199,7 @@ impl<const W: usize> WideBvh<W> {
         for (c, (r, h)) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)).enumerate() {
             let soa = RaysSoA::new_with::<false>(r);
             for (i, (ray, hit)) in r.iter().zip(h.iter_mut()).enumerate() {
-                if traced(c * PACKET + i) {
+                if super::stream::FirstStream::traced(first, rays, c * PACKET + i) {
                     continue;
                 }
                 *hit = if soa.valid >> i & 1 == 0 {

@@ -118,6 +118,26 @@ pub(super) fn octant_streams_until(rays: &[Ray], skip: impl Fn(usize, usize) -> 
     }
 }
 
+/// The rays a batch's first stream traced (`hit_stream`'s `closest_streams_where_shared`):
+/// the valid rays of octant `oct` up to index `last`, which the way the
+/// rest of the batch goes skips. A value, not a closure, so that the
+/// batch's single-ray and interleaved loops are one compiled function
+/// whether or not a stream went first: two instances of the same loop
+/// can differ in speed by their code's placement alone.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct FirstStream {
+    pub(super) last: usize,
+    pub(super) oct: usize,
+}
+
+impl FirstStream {
+    /// Whether `rays[i]` was traced in the first stream `first`.
+    #[inline(always)]
+    pub(super) fn traced(first: Option<FirstStream>, rays: &[Ray], i: usize) -> bool {
+        first.is_some_and(|f| i <= f.last && rays[i].is_valid() && octant(rays[i].dir) == f.oct)
+    }
+}
+
 /// The node rows a stream of octant `oct` reads as near and far planes
 /// (indices into `Node::bounds`): one octant fixes them for all its rays.
 pub(super) fn octant_planes(oct: usize) -> ([usize; 3], [usize; 3]) {
