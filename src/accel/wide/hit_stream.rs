@@ -558,4 +558,42 @@ mod tests {
             assert!(!bvh.streams_pay(&random[..1024]), "{spec}: random rays stream");
         }
     }
+
+    /// The origin rule's pass stops early (`streams_pay`) yet decides as a
+    /// pass over the whole batch does: batches of a tile's diffuse rays
+    /// with ever more random rays mixed in, at either end or spread
+    /// through, with invalid rays among them, cross the bar both ways.
+    #[test]
+    fn the_origin_rule_stopping_early_decides_as_the_whole_pass() {
+        let scene = load_bench_scene("arch:50k");
+        let bvh = WideBvh::<8>::build(&scene.shapes);
+        let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
+        let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
+        let random = crate::accel::workloads::random_rays(&scene, 4096, 2);
+        let whole_pass = |rays: &[Ray]| {
+            let valid: Vec<&Ray> = rays.iter().filter(|r| r.is_valid()).collect();
+            let sum: f32 = valid.windows(2).map(|w| (w[1].origin - w[0].origin).length()).sum();
+            let steps = valid.len().saturating_sub(1);
+            rays.len() >= STREAM_MIN_RAYS && steps >= STREAM_MIN_RAYS && sum < steps as f32 * COHERENT_STEP * bvh.tree.root_diagonal
+        };
+        let (mut yes, mut no) = (0, 0);
+        for mixed in (0..=64).step_by(2) {
+            for layout in 0..3 {
+                let mut batch: Vec<Ray> = diffuse[..512].to_vec();
+                for k in 0..mixed {
+                    let at = match layout {
+                        0 => batch.len(),
+                        1 => 0,
+                        _ => (k * 37) % batch.len(),
+                    };
+                    batch.insert(at, random[k]);
+                }
+                batch[100].tmax = f32::NAN;
+                let want = whole_pass(&batch);
+                assert_eq!(bvh.streams_pay(&batch), want, "{mixed} random rays mixed in, layout {layout}");
+                if want { yes += 1 } else { no += 1 }
+            }
+        }
+        assert!(yes > 10 && no > 10, "the batches cross the bar one way only: {yes} stream, {no} do not");
+    }
 }
