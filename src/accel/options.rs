@@ -39,7 +39,7 @@ pub enum ShadowWay {
 pub enum BatchWay {
     /// Per batch, from the batch itself: streams where its rays start close
     /// together, else interleaved single rays on trees whose rays miss the
-    /// caches, else single rays (the default; see `wide::hit_stream`).
+    /// caches, else single rays (the default; see `wide::stream_choice`).
     #[default]
     Auto,
     /// One ray at a time.

@@ -8,25 +8,17 @@
 //! closest distance; a leaf is tested by each ray that entered it. Where a
 //! batch's rays start near one another (a tile's bounce rays), they share
 //! most of their node fetches; where they do not (rays from anywhere in the
-//! scene), the stream costs more than single rays. Which batches stream:
-//! those whose first full stream shows its rays sharing the nodes
-//! (`closest_streams_where_shared`), else one ray at a time, or
-//! interleaved on trees too large for the caches, where the stream must
-//! share more to pay; on trees of middling size whose rays miss the
-//! nearer caches, those whose origins lie close together (`streams_pay`,
-//! else interleaved). A batch whose rays start far apart tries no first
-//! stream on a tree where streams of such rays were seen to fall well
-//! short when it was built (`scattered_batches`).
+//! scene), the stream costs more than single rays: which batches stream is
+//! `stream_choice`'s.
 //!
 //! Answers equal single-ray traversal's: each ray tests every triangle
 //! whose leaf box it enters within its current closest distance, with the
 //! watertight test and the same tie-break (`closer`), so its closest hit is
 //! the same whatever order the leaves come in.
 
-use super::stream::{octant_planes, octant_streams, octant_streams_until, ready, FirstStream, StreamRays, STREAM};
+use super::stream::{octant_planes, octant_streams, ready, StreamRays, STREAM};
 use super::triangle::Shear;
 use super::stack::WalkStack;
-use super::policy::{Scattered, Unshared};
 use super::{ChildOrder, WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::prims::closer;
 use crate::accel::Hit;
@@ -34,169 +26,14 @@ use crate::geometry::RayTransform;
 use crate::ray::Ray;
 use std::mem::MaybeUninit;
 
-/// Batches of fewer rays never stream: a stream of one octant's few rays
-/// shares little.
-pub(super) const STREAM_MIN_RAYS: usize = 128;
-
-/// A batch streams when the mean distance between consecutive rays'
-/// origins is under this share of the tree's diagonal: its rays start
-/// close together, so streams of them share their nodes.
-pub(super) const COHERENT_STEP: f32 = 1.0 / 32.0;
-
-/// A batch goes on in streams where its first full stream made at least
-/// `SHARED.0 / SHARED.1` ray-node tests per node fetched: its rays shared
-/// the nodes, where a stream pays for its bookkeeping. Measured on a Zen 3
-/// EPYC (tests per fetch: streams ÷ one ray at a time, 1 thread), random
-/// rays: CBbunny 5.70: 1.13, arch:2M 5.78: 1.11, beetle 2.78: 1.02, cow
-/// 2.68: 0.88, maxplanck 2.06: 0.89; diffuse rays in 32x32 tiles: arch:2M
-/// 3.87: 0.89, CBbunny 8.08: 1.13, stadium:2M 11.9: 1.22, maxplanck 12.7:
-/// 1.32, beetle 13.8: 1.25, cow 23.7: 1.26.
-const SHARED: (u64, u64) = (9, 2);
-
-/// Where the batch's other way is interleaving (trees too large for the
-/// caches), which already overlaps the misses a stream would share, the
-/// first stream must make at least 6 tests per fetch. Diffuse rays in
-/// 32x32 tiles, 1 thread, native ÷ Embree 4 (Zen 3 EPYC), interleaved /
-/// this rule at 4.5, 6 and 8 tests per fetch: sphere 1M 0.92 / 1.17 /
-/// 1.15 / 1.09 (its first streams made 3-19 tests per fetch), sphere 5M
-/// 1.21 / 1.12 / 1.18 / 1.18 (2-6), subdivided bunny 1.5M 1.05 / 1.14 /
-/// 1.12 / 1.13 (2-52); grass 2M's diffuse streams (3-4) and every random
-/// stream (1.1-2.2) go interleaved at any of these. Random batches do not
-/// try a stream there (`streams_pay`): tried on each, the first stream
-/// cost sphere 5M's random rays 5-11 %.
-const SHARED_OVER_INTERLEAVED: (u64, u64) = (6, 1);
-
-/// A batch's rays start far apart when the mean distance between
-/// consecutive origins, over its first `SCATTER_STEPS` steps, is at least
-/// this share of the tree's diagonal. Rays from anywhere in a box step
-/// about 0.4 of its diagonal; a tile's bounce rays a small fraction.
-const SCATTERED_STEP: f32 = 1.0 / 8.0;
-
-/// Steps between origins read to judge a batch scattered: a pass over the
-/// whole batch cost 3 % of cow's random batches.
-const SCATTER_STEPS: usize = 64;
-
-/// Rays of the tree's sample that decides whether scattered batches try a
-/// first stream (`scattered_batches`).
-const SCATTER_SAMPLE: usize = 2048;
-
-/// Scattered batches try a first stream on trees where streams of rays
-/// from anywhere in the box made at least 3/4 of `SHARED`'s tests per
-/// fetch. Measured from 2048 such rays (tests per fetch): CBbunny 5.79,
-/// arch:2M 5.76, where random batches stream for 11-13 %; beetle 2.81, cow
-/// 2.66, stadium:2M 2.50, maxplanck 2.06, whose random batches' first
-/// streams are always refused (the probe cost cow's random batches 2.6 %
-/// against one ray at a time, in one process). The same rays' streams read
-/// within 5 % at 512 and 8192 rays but on arch (6.82 at 512).
-const SCATTERED_MAY_SHARE: (u64, u64) = (27, 8);
-
 /// What a stream did: nodes fetched, and ray-node tests made at them.
 #[derive(Default)]
-struct StreamWork {
-    nodes: u64,
-    tests: u64,
-}
-
-impl StreamWork {
-    /// Whether the stream's rays shared its nodes enough to go on in
-    /// streams rather than the way `otherwise` says (`SHARED`,
-    /// `SHARED_OVER_INTERLEAVED`).
-    fn shared(&self, otherwise: Unshared) -> bool {
-        let (num, den) = match otherwise {
-            Unshared::Single(_) => SHARED,
-            Unshared::Interleaved => SHARED_OVER_INTERLEAVED,
-        };
-        self.tests * den >= self.nodes * num
-    }
-}
-
-/// The batch's first stream to fill (`STREAM` valid rays of one octant, in
-/// batch order), as `octant_streams` would trace it first, and its octant.
-fn first_full_stream(rays: &[Ray]) -> Option<([u32; STREAM], usize)> {
-    // Full streams are traced before any octant's rest: a first stream
-    // shorter than `STREAM` means the batch has none.
-    let mut first = None;
-    octant_streams_until(rays, |_, _| false, |which, oct| {
-        first = which.try_into().ok().map(|w: [u32; STREAM]| (w, oct));
-        false
-    });
-    first
+pub(super) struct StreamWork {
+    pub(super) nodes: u64,
+    pub(super) tests: u64,
 }
 
 impl<const W: usize> WideBvh<W> {
-    /// Whether `rays` go in streams (`closest_streams`) rather than one at
-    /// a time: decided from the batch alone (so the same batch always
-    /// takes the same way), by how far apart consecutive rays start.
-    pub(super) fn streams_pay(&self, rays: &[Ray]) -> bool {
-        if rays.len() < STREAM_MIN_RAYS {
-            return false;
-        }
-        // A batch of n rays has at most n - 1 steps: once the sum reaches
-        // what they may add up to, no rest of the batch can bring the mean
-        // under the bar (a scattered batch stops after about 1/16 of it).
-        let limit = (rays.len() - 1) as f32 * COHERENT_STEP * self.tree.root_diagonal;
-        let (mut sum, mut steps) = (0.0f32, 0u32);
-        let mut prev: Option<glam::Vec3> = None;
-        for r in rays.iter().filter(|r| r.is_valid()) {
-            if let Some(p) = prev {
-                sum += (r.origin - p).length();
-                steps += 1;
-                if sum >= limit {
-                    return false;
-                }
-            }
-            prev = Some(r.origin);
-        }
-        steps as usize >= STREAM_MIN_RAYS && sum < steps as f32 * COHERENT_STEP * self.tree.root_diagonal
-    }
-
-    /// Whether the rays of a batch start far apart (`SCATTERED_STEP`),
-    /// judged from its first valid rays alone.
-    pub(super) fn origins_scattered(&self, rays: &[Ray]) -> bool {
-        let (mut sum, mut steps) = (0.0f32, 0usize);
-        let mut prev: Option<glam::Vec3> = None;
-        for r in rays.iter().filter(|r| r.is_valid()) {
-            if let Some(p) = prev {
-                sum += (r.origin - p).length();
-                steps += 1;
-                if steps == SCATTER_STEPS {
-                    break;
-                }
-            }
-            prev = Some(r.origin);
-        }
-        steps > 0 && sum >= steps as f32 * SCATTERED_STEP * self.tree.root_diagonal
-    }
-
-    /// Whether scattered batches try a first stream on this tree
-    /// (`SCATTERED_MAY_SHARE`): counted over streams of `SCATTER_SAMPLE`
-    /// rays from anywhere in the tree's box (as the benchmark's random
-    /// rays), fixed seed, so the same tree always decides the same.
-    ///
-    /// # Safety
-    /// The CPU must have AVX2; `W` must be 8.
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn scattered_batches(&self) -> Scattered {
-        if self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
-            return Scattered::Single;
-        }
-        let rays = crate::accel::workloads::random_rays_in(&self.tree.bounds, SCATTER_SAMPLE, 0x5CA7);
-        let mut hits = vec![None; rays.len()];
-        let mut work = StreamWork::default();
-        octant_streams_until(&rays, |_, _| false, |which, oct| {
-            if which.len() == STREAM {
-                self.closest_stream(&rays, which, oct, &mut hits, &mut work);
-            }
-            true
-        });
-        let (num, den) = SCATTERED_MAY_SHARE;
-        if work.tests * den >= work.nodes * num {
-            Scattered::TryStream
-        } else {
-            Scattered::Single
-        }
-    }
-
     /// `hits[i]` = the closest hit of `rays[i]`, in streams of up to
     /// `STREAM` rays of one octant each.
     ///
@@ -213,77 +50,11 @@ impl<const W: usize> WideBvh<W> {
         octant_streams(rays, |which, oct| self.closest_stream(rays, which, oct, hits, &mut StreamWork::default()));
     }
 
-    /// `hits[i]` = the closest hit of `rays[i]`: the batch's first full
-    /// stream is traced as a stream, and the rest go in streams too where
-    /// that stream's rays shared its nodes (`StreamWork::shared`), else as
-    /// `otherwise` says. The way depends on the batch alone.
-    ///
-    /// # Safety
-    /// As `closest_streams`.
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn closest_streams_where_shared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared) {
-        debug_assert!(W == 8);
-        let Some((which, oct)) = self.first_stream_to_try(rays, otherwise) else {
-            return self.closest_unshared(rays, hits, otherwise, None);
-        };
-        hits.fill(None);
-        let mut work = StreamWork::default();
-        self.closest_stream(rays, &which, oct, hits, &mut work);
-        // The first stream: the valid rays of octant `oct` up to `last`.
-        let first = FirstStream { last: which[STREAM - 1] as usize, oct };
-        let traced = |i: usize, o: usize| o == first.oct && i <= first.last;
-        if work.shared(otherwise) {
-            octant_streams_until(rays, traced, |which, oct| {
-                self.closest_stream(rays, which, oct, hits, &mut work);
-                true
-            });
-        } else {
-            self.closest_unshared(rays, hits, otherwise, Some(first));
-        }
-    }
-
-    /// The first full stream of `rays` and its octant, where
-    /// `closest_streams_where_shared` tries one. On trees too large for
-    /// the caches the first stream itself costs (its fetches miss, one
-    /// after another, where interleaved rays overlap theirs), so it is
-    /// tried there only where the batch's rays start close together and
-    /// could share (`streams_pay`); elsewhere not where they start far
-    /// apart and the tree's rays from anywhere were seen not to share
-    /// (`Scattered::Single`).
-    fn first_stream_to_try(&self, rays: &[Ray], otherwise: Unshared) -> Option<([u32; STREAM], usize)> {
-        // The constant-time checks first; the origin rule is a pass over the batch.
-        if rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
-            return None;
-        }
-        let refused = match otherwise {
-            Unshared::Interleaved => !self.streams_pay(rays),
-            Unshared::Single(Scattered::Single) => self.origins_scattered(rays),
-            Unshared::Single(Scattered::TryStream) => false,
-        };
-        if refused {
-            return None;
-        }
-        first_full_stream(rays)
-    }
-
-    /// The rays of a batch but those its first stream traced, the way
-    /// `otherwise` says.
-    ///
-    /// # Safety
-    /// As `closest_streams`.
-    #[inline(always)]
-    unsafe fn closest_unshared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared, first: Option<FirstStream>) {
-        match otherwise {
-            Unshared::Single(_) => self.closest_batch_except(rays, hits, first),
-            Unshared::Interleaved => self.closest_interleaved_except(rays, hits, first),
-        }
-    }
-
     /// One stream: `which` (at most `STREAM` indices into `rays`, all valid,
     /// all of octant `oct`); its node fetches and ray-node tests are added
     /// to `work`.
     #[inline(always)]
-    unsafe fn closest_stream(&self, rays: &[Ray], which: &[u32], oct: usize, hits: &mut [Option<Hit>], work: &mut StreamWork) {
+    pub(super) unsafe fn closest_stream(&self, rays: &[Ray], which: &[u32], oct: usize, hits: &mut [Option<Hit>], work: &mut StreamWork) {
         let n = which.len();
         let mut s = StreamRays::new(rays, which);
         let mut best: [Option<Hit>; STREAM] = [None; STREAM];
@@ -363,10 +134,9 @@ impl<const W: usize> WideBvh<W> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::super::tests::{avx_or_skip, rays, shapes};
+pub(super) mod tests {
+    use super::super::tests::avx_or_skip;
     use super::*;
-    use crate::accel::brute::BruteForce;
     use crate::accel::Traversal;
     use crate::accel::workloads::{camera_rays, diffuse_rays, tile_order};
     use super::super::policy::ClosestBatches;
@@ -374,150 +144,9 @@ mod tests {
     use crate::camera::Camera;
 
     /// `closest_streams` as its callers run it (compiled with AVX2).
-    fn streams(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
+    pub(in crate::accel::wide) fn streams(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
         // SAFETY: the tests call this only after `avx_or_skip`.
         unsafe { bvh.closest_streams(rays, hits) }
-    }
-
-    /// Streams find brute force's closest hits: meshes and a sphere in one
-    /// tree, camera, random and tight rays of every octant, short rays,
-    /// rays starting inside boxes, invalid rays among them; batches of
-    /// every size from one ray to all of them; all in streams, and in
-    /// streams where the first stream's rays share their nodes, else one
-    /// ray at a time or interleaved (both ways taken; the first stream's
-    /// rays neither traced again nor left out).
-    #[test]
-    fn closest_streams_match_brute_force() {
-        if !avx_or_skip("the closest-hit streams") {
-            return;
-        }
-        let shapes = shapes();
-        let rays = rays(&shapes);
-        let brute = BruteForce::new(&shapes);
-        let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
-        assert!(want.iter().filter(|h| h.is_some()).count() > 1000 && want.iter().filter(|h| h.is_none()).count() > 1000);
-        let bvh = WideBvh::<8>::build(&shapes);
-        // Batches of 777 take both ways (the test rays come in runs of
-        // coherent and random rays; where the other way is interleaving,
-        // random runs try no stream).
-        for (otherwise, unshared) in [(Unshared::Single(Scattered::TryStream), Some(false)), (Unshared::Single(Scattered::Single), None), (Unshared::Interleaved, None)] {
-            let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r, otherwise)).collect();
-            assert!(ways.contains(&Some(true)) && ways.contains(&unshared), "{otherwise:?}: batches of 777 take one way only: {ways:?}");
-        }
-        type Way = fn(&WideBvh<8>, &[Ray], &mut [Option<Hit>]);
-        let ways = [
-            ("streams", streams as Way),
-            ("streams where shared, else single", where_shared as Way),
-            ("streams where shared, else and where scattered single", where_shared_unless_scattered as Way),
-            ("streams where shared, else interleaved", where_shared_else_interleaved as Way),
-        ];
-        for (name, way) in ways {
-            for chunk in [rays.len(), 4096, 777, 128, 127, 65, 64, 3, 1] {
-                let mut got = vec![None; rays.len()];
-                for (r, h) in rays.chunks(chunk).zip(got.chunks_mut(chunk)) {
-                    way(&bvh, r, h);
-                }
-                let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
-                assert_eq!(bad, 0, "{name}, batches of {chunk}: {bad} hits differ from brute force");
-            }
-        }
-    }
-
-    /// `closest_streams_where_shared` as its callers run it, unshared
-    /// batches one ray at a time.
-    fn where_shared(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        // SAFETY: the tests call this only after `avx_or_skip`.
-        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::TryStream)) }
-    }
-
-    /// `where_shared`, batches whose rays start far apart one ray at a
-    /// time without a first stream.
-    fn where_shared_unless_scattered(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        // SAFETY: as above.
-        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::Single)) }
-    }
-
-    /// `where_shared`, unshared batches interleaved.
-    fn where_shared_else_interleaved(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        // SAFETY: as above.
-        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Interleaved) }
-    }
-
-    /// Whether the first full stream of `rays` shares its nodes enough to
-    /// stream rather than go the way `otherwise` says (`None`: the batch
-    /// tries no stream).
-    fn first_shared(bvh: &WideBvh<8>, rays: &[Ray], otherwise: Unshared) -> Option<bool> {
-        let (which, oct) = bvh.first_stream_to_try(rays, otherwise)?;
-        let mut hits = vec![None; rays.len()];
-        let mut work = StreamWork::default();
-        // SAFETY: as above.
-        unsafe { bvh.closest_stream(rays, &which, oct, &mut hits, &mut work) };
-        Some(work.shared(otherwise))
-    }
-
-    /// On a bench scene, a tile's diffuse rays share their nodes and random
-    /// rays do not, or where the other way is interleaving do not try a
-    /// stream (the ways the rule takes), and either way the batch finds the
-    /// single-ray hits.
-    #[test]
-    fn the_first_stream_chooses_the_way() {
-        if !avx_or_skip("the closest-hit streams") {
-            return;
-        }
-        let scene = load_bench_scene("subdiv:CBbunny:100k");
-        let bvh = WideBvh::<8>::build(&scene.shapes);
-        let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
-        let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
-        let random = crate::accel::workloads::random_rays(&scene, 8192, 2);
-        let (d, r) = (&diffuse[..1024], &random[..1024]);
-        let (try_stream, single) = (Unshared::Single(Scattered::TryStream), Unshared::Single(Scattered::Single));
-        for otherwise in [try_stream, single, Unshared::Interleaved] {
-            assert_eq!(first_shared(&bvh, d, otherwise), Some(true), "{otherwise:?}: a tile's diffuse rays do not share their nodes");
-        }
-        assert!(!bvh.origins_scattered(d) && bvh.origins_scattered(r), "a tile's diffuse rays start far apart, or random rays do not");
-        assert_eq!(first_shared(&bvh, r, try_stream), Some(false), "random rays share their nodes");
-        assert_eq!(first_shared(&bvh, r, single), None, "random rays try a stream where scattered batches go one by one");
-        assert_eq!(first_shared(&bvh, r, Unshared::Interleaved), None, "random rays try a stream where the other way is interleaving");
-        for rays in [d, r] {
-            let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
-            for way in [where_shared, where_shared_unless_scattered, where_shared_else_interleaved] {
-                let mut got = vec![None; rays.len()];
-                way(&bvh, rays, &mut got);
-                assert!(got == want, "hits differ from single rays");
-            }
-        }
-    }
-
-    /// Scattered batches skip the first stream only on trees where no
-    /// random batch's first stream would have shared its nodes (cow,
-    /// maxplanck, the stadium), and try it where some do (CBbunny, the
-    /// architecture scene): the choice made from the tree's own sample
-    /// (`scattered_batches`) agrees with the benchmark's random batches;
-    /// a tree built again chooses the same.
-    #[test]
-    fn scattered_batches_skip_the_first_stream_where_random_streams_do_not_share() {
-        if !avx_or_skip("the closest-hit streams") {
-            return;
-        }
-        let file = |name: &str| crate::scene::load_file(&crate::scene::generated::in_repository(name).unwrap()).unwrap();
-        let scenes = [("CBbunny", file("CBbunny")), ("cow", file("cow")), ("maxplanck", file("maxplanck")), ("arch:200k", load_bench_scene("arch:200k")), ("stadium:200k", load_bench_scene("stadium:200k"))];
-        for (name, scene) in scenes {
-            let bvh = WideBvh::<8>::build(&scene.shapes);
-            // SAFETY: after `avx_or_skip`.
-            let chosen = unsafe { bvh.scattered_batches() };
-            assert_eq!(bvh.policy.closest, ClosestBatches::StreamsWhereShared(Unshared::Single(chosen)), "{name}");
-            assert_eq!(unsafe { WideBvh::<8>::build(&scene.shapes).scattered_batches() }, chosen, "{name}: built again");
-            let random = crate::accel::workloads::random_rays(&scene, 4 * 4096, 9);
-            let probes: Vec<Option<bool>> = random.chunks(4096).map(|r| first_shared(&bvh, r, Unshared::Single(Scattered::TryStream))).collect();
-            // Where they try, the first stream still decides batch by batch.
-            let agrees = match chosen {
-                Scattered::TryStream => probes.contains(&Some(true)),
-                Scattered::Single => probes.iter().all(|p| *p == Some(false)),
-            };
-            assert!(agrees, "{name}: {chosen:?}, but the random batches' first streams say {probes:?}");
-            let expected = if name.starts_with("CBbunny") || name.starts_with("arch") { Scattered::TryStream } else { Scattered::Single };
-            assert_eq!(chosen, expected, "{name}");
-        }
     }
 
     /// On bench scenes, a tile's diffuse rays (the batches that stream)
@@ -557,43 +186,5 @@ mod tests {
             assert!(bvh.streams_pay(&diffuse[..1024]), "{spec}: a tile's diffuse rays do not stream");
             assert!(!bvh.streams_pay(&random[..1024]), "{spec}: random rays stream");
         }
-    }
-
-    /// The origin rule's pass stops early (`streams_pay`) yet decides as a
-    /// pass over the whole batch does: batches of a tile's diffuse rays
-    /// with ever more random rays mixed in, at either end or spread
-    /// through, with invalid rays among them, cross the bar both ways.
-    #[test]
-    fn the_origin_rule_stopping_early_decides_as_the_whole_pass() {
-        let scene = load_bench_scene("arch:50k");
-        let bvh = WideBvh::<8>::build(&scene.shapes);
-        let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
-        let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
-        let random = crate::accel::workloads::random_rays(&scene, 4096, 2);
-        let whole_pass = |rays: &[Ray]| {
-            let valid: Vec<&Ray> = rays.iter().filter(|r| r.is_valid()).collect();
-            let sum: f32 = valid.windows(2).map(|w| (w[1].origin - w[0].origin).length()).sum();
-            let steps = valid.len().saturating_sub(1);
-            rays.len() >= STREAM_MIN_RAYS && steps >= STREAM_MIN_RAYS && sum < steps as f32 * COHERENT_STEP * bvh.tree.root_diagonal
-        };
-        let (mut yes, mut no) = (0, 0);
-        for mixed in (0..=64).step_by(2) {
-            for layout in 0..3 {
-                let mut batch: Vec<Ray> = diffuse[..512].to_vec();
-                for k in 0..mixed {
-                    let at = match layout {
-                        0 => batch.len(),
-                        1 => 0,
-                        _ => (k * 37) % batch.len(),
-                    };
-                    batch.insert(at, random[k]);
-                }
-                batch[100].tmax = f32::NAN;
-                let want = whole_pass(&batch);
-                assert_eq!(bvh.streams_pay(&batch), want, "{mixed} random rays mixed in, layout {layout}");
-                if want { yes += 1 } else { no += 1 }
-            }
-        }
-        assert!(yes > 10 && no > 10, "the batches cross the bar one way only: {yes} stream, {no} do not");
     }
 }

@@ -2,7 +2,7 @@
 //! core's caches traced `IN_FLIGHT` rays at a time, step by step in turn, so
 //! one ray's node fetch overlaps the other rays' box and triangle tests
 //! (on large structures, the batches whose first stream's rays do not
-//! share its nodes: `interleave_reach`, `hit_stream`; camera batches go in
+//! share its nodes: `interleave_reach`, `stream_choice`; camera batches go in
 //! packets on every tree, `frustum`).
 //!
 //! On the 1M-triangle mesh, random rays spent 42 % of their samples on the
@@ -78,7 +78,7 @@ pub(super) enum InterleaveReach {
     /// Batches whose rays do not start close together.
     Incoherent,
     /// Every closest-hit batch but those whose first stream's rays share
-    /// its nodes (`hit_stream`).
+    /// its nodes (`stream_choice`).
     All,
 }
 

@@ -15,10 +15,10 @@
 //!   several rays at once (`leaf_rays`); shadow packets as swept boxes
 //!   (`sweep`) or with a ray mask per node (`masked`), after the occluder
 //!   cache (`occluders`);
-//! * incoherent batches over trees too large for the caches (`cost`) with 4
+//! * incoherent batches over trees too large for the caches (`cost`) with 12
 //!   rays interleaved (`interleave`), or in streams with a ray mask per node
-//!   where a batch's rays start close together (`hit_stream`; shadow rays:
-//!   `stream`).
+//!   where a batch's rays share their nodes (`hit_stream`, chosen by
+//!   `stream_choice`; shadow rays: `stream`).
 //!
 //! The kernels are written once over the lane width (`lanes`: 4, 8 or 16
 //! f32 lanes behind one trait): the slab test of a node's boxes
@@ -51,6 +51,7 @@ mod single;
 mod split_choice;
 mod stack;
 mod stream;
+mod stream_choice;
 mod triangle;
 
 #[cfg(test)]

@@ -157,7 +157,7 @@ impl Policy {
         let closest = match options.batch {
             // Where the tree is large enough to interleave, a batch streams
             // only where its first stream shares more than elsewhere
-            // (`hit_stream::SHARED_OVER_INTERLEAVED`): twelve interleaved
+            // (`stream_choice::SHARED_OVER_INTERLEAVED`): twelve interleaved
             // walkers, each prefetching the node it enters next, overlap
             // the misses a stream would share.
             BatchWay::Auto if interleave => ClosestBatches::StreamsWhereShared(Unshared::Interleaved),

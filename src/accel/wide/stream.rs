@@ -118,7 +118,7 @@ pub(super) fn octant_streams_until(rays: &[Ray], skip: impl Fn(usize, usize) -> 
     }
 }
 
-/// The rays a batch's first stream traced (`hit_stream`'s `closest_streams_where_shared`):
+/// The rays a batch's first stream traced (`stream_choice`'s `closest_streams_where_shared`):
 /// the valid rays of octant `oct` up to index `last`, which the way the
 /// rest of the batch goes skips. A value, not a closure, so that the
 /// batch's single-ray and interleaved loops are one compiled function
