@@ -87,10 +87,15 @@ impl StreamWork {
     /// streams rather than the way `otherwise` says (`SHARED`,
     /// `SHARED_OVER_INTERLEAVED`).
     pub(super) fn shared(&self, otherwise: Unshared) -> bool {
-        let (num, den) = match otherwise {
+        self.tests_per_fetch_at_least(match otherwise {
             Unshared::Single(_) => SHARED,
             Unshared::Interleaved => SHARED_OVER_INTERLEAVED,
-        };
+        })
+    }
+
+    /// Whether the stream made at least `num / den` ray-node tests per
+    /// node fetched.
+    fn tests_per_fetch_at_least(&self, (num, den): (u64, u64)) -> bool {
         self.tests * den >= self.nodes * num
     }
 }
@@ -170,8 +175,7 @@ impl<const W: usize> WideBvh<W> {
             }
             true
         });
-        let (num, den) = SCATTERED_MAY_SHARE;
-        if work.tests * den >= work.nodes * num {
+        if work.tests_per_fetch_at_least(SCATTERED_MAY_SHARE) {
             Scattered::TryStream
         } else {
             Scattered::Single
