@@ -10,11 +10,15 @@ use crate::error::{Error, Result};
 /// Which instruction set native traversal runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum NativeIsa {
-    /// AVX2 where the CPU has it, else SSE2 (the default).
+    /// AVX2 where the CPU has it, else SSE2; single rays' walks compiled
+    /// with AVX-512VL as well where the CPU has it (the default).
     #[default]
     Auto,
     /// SSE2 even where AVX2 runs (A/B comparisons; same answers).
     Sse2,
+    /// AVX2 without AVX-512VL even where the CPU has it (A/B comparisons;
+    /// same answers).
+    Avx2,
     /// AVX2 with the AVX-512 packet kernels, where the CPU has AVX-512F
     /// (not the default, by measurement: level on a Zen 5, 30 % slower
     /// camera rays on a Xeon; see `wide`).
@@ -95,9 +99,10 @@ impl NativeOptions {
         if let Some(v) = var("PATHTRACER_NATIVE_ISA") {
             o.isa = match v.as_str() {
                 "sse" | "sse2" => NativeIsa::Sse2,
+                "avx2" => NativeIsa::Avx2,
                 "avx512" => NativeIsa::Avx512Packets,
-                "auto" | "avx2" => NativeIsa::Auto,
-                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_ISA={v}: expected sse, avx2 or avx512"))),
+                "auto" => NativeIsa::Auto,
+                _ => return Err(Error::new(format!("PATHTRACER_NATIVE_ISA={v}: expected auto, sse, avx2 or avx512"))),
             };
         }
         if let Some(v) = var("PATHTRACER_NATIVE_SPLITS") {
@@ -164,6 +169,8 @@ mod tests {
         assert_eq!((o.isa, o.splits, o.shadow), (NativeIsa::Sse2, Splits::Budget(0.3), ShadowWay::Streams));
         assert_eq!(parse(&[("PATHTRACER_NATIVE_SPLITS", "auto")]).unwrap().splits, Splits::Auto);
         assert_eq!(parse(&[("PATHTRACER_NATIVE_ISA", "avx512")]).unwrap().isa, NativeIsa::Avx512Packets);
+        assert_eq!(parse(&[("PATHTRACER_NATIVE_ISA", "avx2")]).unwrap().isa, NativeIsa::Avx2);
+        assert_eq!(parse(&[("PATHTRACER_NATIVE_ISA", "auto")]).unwrap().isa, NativeIsa::Auto);
         assert_eq!(parse(&[("PATHTRACER_NATIVE_BATCH", "streams")]).unwrap().batch, BatchWay::Streams);
         for (k, v) in [("PATHTRACER_NATIVE_BATCH", "sorted"), ("PATHTRACER_NATIVE_ISA", "neon"), ("PATHTRACER_NATIVE_SPLITS", "5"), ("PATHTRACER_NATIVE_SPLITS", "nan"), ("PATHTRACER_NATIVE_SHADOW", "both")] {
             let e = parse(&[(k, v)]).unwrap_err().0;

@@ -62,10 +62,10 @@ use std::mem::MaybeUninit;
 /// 1M and 5M and grass 2M (1 packet in 35-310 gives up), arch 2M 0.98.
 pub(super) const WASTED_LEAF_TESTS: u32 = 32;
 
-/// Camera packets traced as frusta on this thread (tests check which way
-/// a batch went).
 #[cfg(test)]
 thread_local! {
+    /// Camera packets traced as frusta on this thread (tests check which
+    /// way a batch went).
     pub(super) static FRUSTUM_PACKETS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
 }
 

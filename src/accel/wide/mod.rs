@@ -30,7 +30,30 @@
 //! and of a scalar slab test, in the same order, so answers are
 //! bit-identical to the scalar code (and so to the brute-force oracle)
 //! whatever the instruction set or way. Other targets run the scalar lane
-//! loops, which give the same answers.
+//! loops, which give the same answers. Where the CPU has AVX-512VL, single
+//! rays' walks run compiled with it as well (`avx_twins!`,
+//! `policy::BoxIsa::Avx512Vl`).
+
+/// An AVX2 entry point and its AVX-512VL twin (`BoxIsa::Avx512Vl`) over one
+/// body: the kernels' intrinsics inline only into functions built with
+/// their features, so each twin is the always-inlined walk compiled for its
+/// instruction set. Attributes given go on both.
+///
+/// The twins are `unsafe`: the CPU must have AVX2 (the first) or AVX2 and
+/// AVX-512F, VL, BW and DQ (the second; `Policy::avx512vl`).
+macro_rules! avx_twins {
+    ($(#[$m:meta])* fn $avx2:ident / $avx512vl:ident (&$self:ident $(, $a:ident: $t:ty)*) $body:block) => {
+        $(#[$m])*
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        pub(super) unsafe fn $avx2(&$self $(, $a: $t)*) $body
+
+        $(#[$m])*
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
+        pub(super) unsafe fn $avx512vl(&$self $(, $a: $t)*) $body
+    };
+}
 
 mod cost;
 mod frustum;
@@ -361,13 +384,7 @@ impl<const W: usize> Traversal for WideBvh<W> {
         // Not through `intersect_batch`: one ray gains nothing from the
         // interleaved walkers and would pay for setting them up.
         let mut hit = [None];
-        #[cfg(target_arch = "x86_64")]
-        if self.policy.avx() {
-            // SAFETY: the policy has AVX2 box tests only where the CPU has AVX2.
-            unsafe { self.closest_all_avx(std::slice::from_ref(ray), &mut hit) };
-            return hit[0];
-        }
-        self.closest_all::<false>(std::slice::from_ref(ray), &mut hit);
+        self.closest_all_simd(std::slice::from_ref(ray), &mut hit);
         hit[0]
     }
 
@@ -388,7 +405,7 @@ impl<const W: usize> Traversal for WideBvh<W> {
                     ClosestBatches::StreamsWhereShared(otherwise) => self.closest_streams_where_shared(rays, hits, otherwise),
                     ClosestBatches::StreamsElseInterleaved if self.streams_pay(rays) => self.closest_streams(rays, hits),
                     ClosestBatches::Interleaved | ClosestBatches::StreamsElseInterleaved => self.closest_interleaved_avx(rays, hits),
-                    ClosestBatches::Single => self.closest_batch_avx(rays, hits),
+                    ClosestBatches::Single => self.closest_batch_except(rays, hits, None),
                 }
             };
         }
@@ -397,12 +414,7 @@ impl<const W: usize> Traversal for WideBvh<W> {
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len());
-        #[cfg(target_arch = "x86_64")]
-        if self.policy.avx() {
-            // SAFETY: as above.
-            return unsafe { self.any_all_avx(rays, out) };
-        }
-        self.any_all::<false>(rays, out)
+        self.any_all_simd(rays, out)
     }
 
     fn intersect_coherent(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {

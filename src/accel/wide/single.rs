@@ -172,42 +172,43 @@ impl<const W: usize> WideBvh<W> {
 
     /// `closest_all` of a batch whose rays are set up 16 at a time in one
     /// AVX2 pass (`RaysSoA`: the same constants, bit for bit, as each ray's
-    /// own set-up), then walked one at a time.
+    /// own set-up), then walked one at a time with the policy's kernels,
+    /// but for the rays that the batch's `first` stream traced (none when
+    /// `None`), whose hits are left as they are.
     ///
     /// # Safety
-    /// The CPU must have AVX2.
+    /// The policy must run the AVX2 kernels (`self.policy.avx()`).
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn closest_batch_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        self.closest_batch_except(rays, hits, None);
+    pub(super) unsafe fn closest_batch_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], first: Option<super::stream::FirstStream>) {
+        if self.policy.avx512vl() {
+            self.closest_batch_except_avx512vl(rays, hits, first)
+        } else {
+            self.closest_batch_except_avx2(rays, hits, first)
+        }
     }
 
-    /// `closest_batch_avx` of the rays but those that the batch's `first`
-    /// stream traced, whose hits are left as they are. Never inlined: one
-    /// compiled loop for every caller (`FirstStream`).
-    ///
-    /// # Safety
-    /// The CPU must have AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    #[inline(never)]
-    pub(super) unsafe fn closest_batch_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], first: Option<super::stream::FirstStream>) {
-        if self.tree.root == EMPTY {
-            hits.fill(None);
-            return;
-        }
-        for (c, (r, h)) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)).enumerate() {
-            let soa = RaysSoA::new_with::<false>(r);
-            for (i, (ray, hit)) in r.iter().zip(h.iter_mut()).enumerate() {
-                if super::stream::FirstStream::traced(first, rays, c * PACKET + i) {
-                    continue;
+    avx_twins! {
+        /// `closest_batch_except`'s loop. Never inlined: one compiled loop
+        /// for every caller (`FirstStream`).
+        #[inline(never)]
+        fn closest_batch_except_avx2 / closest_batch_except_avx512vl(&self, rays: &[Ray], hits: &mut [Option<Hit>], first: Option<super::stream::FirstStream>) {
+            if self.tree.root == EMPTY {
+                hits.fill(None);
+                return;
+            }
+            for (c, (r, h)) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)).enumerate() {
+                let soa = RaysSoA::new_with::<false>(r);
+                for (i, (ray, hit)) in r.iter().zip(h.iter_mut()).enumerate() {
+                    if super::stream::FirstStream::traced(first, rays, c * PACKET + i) {
+                        continue;
+                    }
+                    *hit = if soa.valid >> i & 1 == 0 {
+                        None
+                    } else {
+                        let (rt, shear) = soa.shear(i);
+                        self.closest_set_up::<true>(ray, &rt, &shear, &soa.slab(i), &mut 0)
+                    };
                 }
-                *hit = if soa.valid >> i & 1 == 0 {
-                    None
-                } else {
-                    let (rt, shear) = soa.shear(i);
-                    self.closest_set_up::<true>(ray, &rt, &shear, &soa.slab(i), &mut 0)
-                };
             }
         }
     }
@@ -290,17 +291,49 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    // The same traversal compiled for AVX2: the box test's intrinsics inline
-    // only into functions built with the feature. Callers check `self.policy.avx()`.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn closest_all_avx(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        self.closest_all::<true>(rays, hits)
+    /// `closest_all` with the policy's kernels.
+    pub(super) fn closest_all_simd(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.policy.avx() {
+            // SAFETY: the policy has AVX2 (and AVX-512VL) kernels only where the CPU has them.
+            return unsafe {
+                if self.policy.avx512vl() {
+                    self.closest_all_avx512vl(rays, hits)
+                } else {
+                    self.closest_all_avx2(rays, hits)
+                }
+            };
+        }
+        self.closest_all::<false>(rays, hits)
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn any_all_avx(&self, rays: &[Ray], out: &mut [bool]) {
-        self.any_all::<true>(rays, out)
+    /// `any_all` with the policy's kernels.
+    pub(super) fn any_all_simd(&self, rays: &[Ray], out: &mut [bool]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.policy.avx() {
+            // SAFETY: as in `closest_all_simd`.
+            return unsafe {
+                if self.policy.avx512vl() {
+                    self.any_all_avx512vl(rays, out)
+                } else {
+                    self.any_all_avx2(rays, out)
+                }
+            };
+        }
+        self.any_all::<false>(rays, out)
+    }
+
+    avx_twins! {
+        /// `closest_all` compiled for the AVX2 kernels.
+        fn closest_all_avx2 / closest_all_avx512vl(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+            self.closest_all::<true>(rays, hits)
+        }
+    }
+
+    avx_twins! {
+        /// `any_all` compiled for the AVX2 kernels.
+        fn any_all_avx2 / any_all_avx512vl(&self, rays: &[Ray], out: &mut [bool]) {
+            self.any_all::<true>(rays, out)
+        }
     }
 }

@@ -70,7 +70,7 @@ pub const EXIT_STATUS: [(u8, &str); 3] = [
 /// The environment variables the program reads when it runs (the build's
 /// and the tests' are in docs/reference/environment.md).
 pub const ENVIRONMENT: [(&str, &str); 7] = [
-    ("PATHTRACER_NATIVE_ISA", "sse, avx2 or avx512: the SIMD level of the native backend's kernels (default: avx2 where the CPU has it)."),
+    ("PATHTRACER_NATIVE_ISA", "auto, sse, avx2 or avx512: the SIMD level of the native backend's kernels (default: auto, AVX2 where the CPU has it, single rays' walks compiled with AVX-512VL where it has that too)."),
     ("PATHTRACER_NATIVE_SPLITS", "auto (the default) or a number from 0 to 4: spatial splits in the native BVH build; auto tries them where the render's rays could repay the second build and keeps them where they cut the traversal work counted on a sample by 10 %; a number fixes the extra references per primitive allowed (0: none)."),
     ("PATHTRACER_NATIVE_BATCH", "single, interleaved, streams or auto: how the native backend traces incoherent closest-hit batches (default auto: decided per batch)."),
     ("PATHTRACER_NATIVE_SHADOW", "packets, streams or auto: how the native backend traces coherent shadow batches (default auto: streams on large trees whose rays miss the caches, packets elsewhere)."),
