@@ -34,24 +34,43 @@
 //! rays' walks run compiled with it as well (`avx_twins!`,
 //! `policy::BoxIsa::Avx512Vl`).
 
-/// An AVX2 entry point and its AVX-512VL twin (`BoxIsa::Avx512Vl`) over one
-/// body: the kernels' intrinsics inline only into functions built with
-/// their features, so each twin is the always-inlined walk compiled for its
-/// instruction set. Attributes given go on both.
-///
-/// The twins are `unsafe`: the CPU must have AVX2 (the first) or AVX2 and
-/// AVX-512F, VL, BW and DQ (the second; `Policy::avx512vl`).
+/// A traversal entry point compiled twice over one body, for AVX2 and for
+/// AVX2 with AVX-512VL (`BoxIsa::Avx512Vl`), and the function that calls
+/// the one the policy chose: the kernels' intrinsics inline only into
+/// functions built with their features, so each twin is the always-inlined
+/// walk compiled for its instruction set. The documentation given goes on
+/// the chooser, the attributes after the parameters on both twins.
 macro_rules! avx_twins {
-    ($(#[$m:meta])* fn $avx2:ident / $avx512vl:ident (&$self:ident $(, $a:ident: $t:ty)*) $body:block) => {
-        $(#[$m])*
+    (
+        $(#[$doc:meta])*
+        fn $name:ident / $avx2:ident / $avx512vl:ident (&$self:ident $(, $a:ident: $t:ty)*)
+        $(#[$twin:meta])*
+        $body:block
+    ) => {
+        $(#[$doc])*
+        ///
+        /// # Safety
+        /// The policy must run the AVX2 kernels (`self.policy.avx()`).
+        #[cfg(target_arch = "x86_64")]
+        pub(super) unsafe fn $name(&$self $(, $a: $t)*) {
+            if $self.policy.avx512vl() {
+                $self.$avx512vl($($a),*)
+            } else {
+                $self.$avx2($($a),*)
+            }
+        }
+
+        #[doc = concat!("`", stringify!($name), "` compiled for AVX2, which the CPU must have.")]
+        $(#[$twin])*
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
-        pub(super) unsafe fn $avx2(&$self $(, $a: $t)*) $body
+        unsafe fn $avx2(&$self $(, $a: $t)*) $body
 
-        $(#[$m])*
+        #[doc = concat!("`", stringify!($name), "` compiled for AVX2 and AVX-512VL: the CPU must have AVX-512F, VL, BW and DQ (`Policy::avx512vl`).")]
+        $(#[$twin])*
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
-        pub(super) unsafe fn $avx512vl(&$self $(, $a: $t)*) $body
+        unsafe fn $avx512vl(&$self $(, $a: $t)*) $body
     };
 }
 

@@ -170,28 +170,16 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    /// `closest_all` of a batch whose rays are set up 16 at a time in one
-    /// AVX2 pass (`RaysSoA`: the same constants, bit for bit, as each ray's
-    /// own set-up), then walked one at a time with the policy's kernels,
-    /// but for the rays that the batch's `first` stream traced (none when
-    /// `None`), whose hits are left as they are.
-    ///
-    /// # Safety
-    /// The policy must run the AVX2 kernels (`self.policy.avx()`).
-    #[cfg(target_arch = "x86_64")]
-    pub(super) unsafe fn closest_batch_except(&self, rays: &[Ray], hits: &mut [Option<Hit>], first: Option<super::stream::FirstStream>) {
-        if self.policy.avx512vl() {
-            self.closest_batch_except_avx512vl(rays, hits, first)
-        } else {
-            self.closest_batch_except_avx2(rays, hits, first)
-        }
-    }
-
     avx_twins! {
-        /// `closest_batch_except`'s loop. Never inlined: one compiled loop
-        /// for every caller (`FirstStream`).
+        /// `closest_all` of a batch whose rays are set up 16 at a time in one
+        /// AVX2 pass (`RaysSoA`: the same constants, bit for bit, as each
+        /// ray's own set-up), then walked one at a time, but for the rays
+        /// that the batch's `first` stream traced (none when `None`), whose
+        /// hits are left as they are. Never inlined: one compiled loop for
+        /// every caller (`FirstStream`).
+        fn closest_batch_except / closest_batch_except_avx2 / closest_batch_except_avx512vl(&self, rays: &[Ray], hits: &mut [Option<Hit>], first: Option<super::stream::FirstStream>)
         #[inline(never)]
-        fn closest_batch_except_avx2 / closest_batch_except_avx512vl(&self, rays: &[Ray], hits: &mut [Option<Hit>], first: Option<super::stream::FirstStream>) {
+        {
             if self.tree.root == EMPTY {
                 hits.fill(None);
                 return;
@@ -295,14 +283,8 @@ impl<const W: usize> WideBvh<W> {
     pub(super) fn closest_all_simd(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         #[cfg(target_arch = "x86_64")]
         if self.policy.avx() {
-            // SAFETY: the policy has AVX2 (and AVX-512VL) kernels only where the CPU has them.
-            return unsafe {
-                if self.policy.avx512vl() {
-                    self.closest_all_avx512vl(rays, hits)
-                } else {
-                    self.closest_all_avx2(rays, hits)
-                }
-            };
+            // SAFETY: checked just now.
+            return unsafe { self.closest_all_avx(rays, hits) };
         }
         self.closest_all::<false>(rays, hits)
     }
@@ -311,28 +293,22 @@ impl<const W: usize> WideBvh<W> {
     pub(super) fn any_all_simd(&self, rays: &[Ray], out: &mut [bool]) {
         #[cfg(target_arch = "x86_64")]
         if self.policy.avx() {
-            // SAFETY: as in `closest_all_simd`.
-            return unsafe {
-                if self.policy.avx512vl() {
-                    self.any_all_avx512vl(rays, out)
-                } else {
-                    self.any_all_avx2(rays, out)
-                }
-            };
+            // SAFETY: checked just now.
+            return unsafe { self.any_all_avx(rays, out) };
         }
         self.any_all::<false>(rays, out)
     }
 
     avx_twins! {
-        /// `closest_all` compiled for the AVX2 kernels.
-        fn closest_all_avx2 / closest_all_avx512vl(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        /// `closest_all` with the AVX2 kernels.
+        fn closest_all_avx / closest_all_avx2 / closest_all_avx512vl(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
             self.closest_all::<true>(rays, hits)
         }
     }
 
     avx_twins! {
-        /// `any_all` compiled for the AVX2 kernels.
-        fn any_all_avx2 / any_all_avx512vl(&self, rays: &[Ray], out: &mut [bool]) {
+        /// `any_all` with the AVX2 kernels.
+        fn any_all_avx / any_all_avx2 / any_all_avx512vl(&self, rays: &[Ray], out: &mut [bool]) {
             self.any_all::<true>(rays, out)
         }
     }
