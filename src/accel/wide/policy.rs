@@ -27,8 +27,8 @@ pub(super) enum BoxIsa {
     /// registers and compares into mask registers; on a CPU that has
     /// AVX-512F, VL, BW and DQ, unless the options ask for AVX2. No 512-bit
     /// register is used, so no clock is lowered for it. Single rays, 1
-    /// thread, one process alternating the two (Intel Xeon, Sapphire
-    /// Rapids), this ÷ AVX2, random / diffuse rays: 1.005–1.036 / 1.003–1.027
+    /// thread, one process alternating the two (a 2-vCPU Intel Xeon with
+    /// AVX-512, 2026-12-02), this ÷ AVX2, random / diffuse: 1.005–1.036 / 1.003–1.027
     /// on the nine bench scenes, never below; the interleaved walkers and
     /// closest-hit streams compiled so read 0.985–1.025, and stay AVX2
     /// (`docs/notes/2026-12-02-avx512vl-walks.md`).
