@@ -248,8 +248,7 @@ impl Policy {
 /// "AVX2, AVX-512VL single rays", "AVX2, AVX-512VL single rays, AVX-512
 /// packets" or "SSE2".
 pub fn simd_level(isa: NativeIsa) -> &'static str {
-    let avx = avx_available_for(isa);
-    isa_words(avx, avx && avx512vl_available(isa), avx512_available(isa))
+    isa_words(avx_available_for(isa), avx512vl_available(isa), avx512_available(isa))
 }
 
 /// The words for the kernels in use, as `simd_level` and the summary line say them.
@@ -287,8 +286,8 @@ fn avx_available_for(isa: NativeIsa) -> bool {
 fn avx512vl_available(isa: NativeIsa) -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        matches!(isa, NativeIsa::Auto | NativeIsa::Avx512Packets)
-            && avx_available()
+        isa != NativeIsa::Avx2
+            && avx_available_for(isa)
             && is_x86_feature_detected!("avx512f")
             && is_x86_feature_detected!("avx512vl")
             && is_x86_feature_detected!("avx512bw")
