@@ -475,7 +475,7 @@ impl<const W: usize> WideBvh<W> {
                 // `order`: nearest first for the closest hit, the batch's
                 // tree's choice for any hit (`Policy::any_order`); a packet stops only
                 // once every ray is occluded.
-                self.push_entered(&mut stack, &mut sp, node, inner, &near, order);
+                self.push_entered::<true>(&mut stack, &mut sp, node, inner, &near, order);
             }
             // Pop the nearest child that may still hold a closer hit (the
             // leaves just tested may have shortened the rays).

@@ -223,7 +223,7 @@ impl<const W: usize> WideBvh<W> {
                     self.prefetch(w.cur);
                     return false;
                 }
-                self.push_entered(&mut w.stack, &mut w.sp, node, mask, &near, super::ChildOrder::NearestFirst);
+                self.push_entered::<true>(&mut w.stack, &mut w.sp, node, mask, &near, super::ChildOrder::NearestFirst);
                 w.cur = w.stack.take_top(&mut w.sp).0;
                 return false;
             }

@@ -103,7 +103,7 @@ impl<const W: usize> WideBvh<W> {
                     }
                     // Push every entered child (the one `order` visits
                     // next on top), and continue with the top one.
-                    self.push_entered(&mut stack, &mut sp, node, mask, &near, order);
+                    self.push_entered::<AVX>(&mut stack, &mut sp, node, mask, &near, order);
                     cur = stack.take_top(&mut sp).0;
                     continue;
                 }

@@ -337,7 +337,7 @@ impl<const W: usize> WideBvh<W> {
             }
             let inner = mask & !leaves;
             if inner != 0 {
-                self.push_entered(&mut stack, &mut sp, node, inner, &near, order);
+                self.push_entered::<true>(&mut stack, &mut sp, node, inner, &near, order);
             }
             match stack.pop_where(&mut sp, |_, ()| Some(())) {
                 Some((code, ())) => cur = code,
