@@ -1,7 +1,9 @@
 //! The box kernels: the slab test of a node's boxes (SSE2, AVX2, scalar)
-//! and the children's front-to-back order. All paths perform the same
-//! per-lane operations in the same order. The triangle test is in
-//! `triangle`.
+//! and the children's front-to-back order (`nearest_first_keys` for one
+//! ray's closest hit, `sort_far_first` for the stacks that carry ray
+//! masks and for farthest-first walks). All paths perform the same
+//! per-lane operations in the same order, and order children alike. The
+//! triangle test is in `triangle`.
 
 #[cfg(target_arch = "x86_64")]
 use super::lanes::Lanes;
@@ -11,7 +13,8 @@ use crate::ray::Ray;
 use std::ops::Div;
 
 /// Insertion sort of at most 8 entered children by entry distance, farthest
-/// first: pushed in that order, the nearest is visited next.
+/// first: pushed in that order, the nearest is visited next. Stable, so
+/// on a tie the child pushed last (the higher lane) is visited first.
 #[inline(always)]
 pub(super) fn sort_far_first<T: Copy>(h: &mut [T], dist: impl Fn(&T) -> f32) {
     for i in 1..h.len() {
