@@ -324,17 +324,21 @@ impl<const W: usize> WideBvh<W> {
         #[cfg(target_arch = "x86_64")]
         unsafe {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let (ptr, bytes) = if code & LEAF_BIT == 0 {
-                (self.tree.nodes.as_ptr().add(code as usize) as *const i8, std::mem::size_of::<Node<W>>())
+            // A node's lines in straight-line code (its size is known); a
+            // leaf's as many as its groups take.
+            if code & LEAF_BIT == 0 {
+                let ptr = self.tree.nodes.as_ptr().add(code as usize) as *const i8;
+                for off in (0..std::mem::size_of::<Node<W>>()).step_by(64) {
+                    _mm_prefetch::<_MM_HINT_T0>(ptr.add(off));
+                }
             } else if code & INLINE_BIT != 0 {
-                (self.tree.groups.as_ptr().add((code & INLINE_GROUP_LIMIT) as usize) as *const i8, ((code >> 28) & 3) as usize * std::mem::size_of::<TriGroup>())
-            } else {
-                return;
-            };
-            let mut off = 0;
-            while off < bytes {
-                _mm_prefetch::<_MM_HINT_T0>(ptr.add(off));
-                off += 64;
+                let ptr = self.tree.groups.as_ptr().add((code & INLINE_GROUP_LIMIT) as usize) as *const i8;
+                let bytes = ((code >> 28) & 3) as usize * std::mem::size_of::<TriGroup>();
+                let mut off = 0;
+                while off < bytes {
+                    _mm_prefetch::<_MM_HINT_T0>(ptr.add(off));
+                    off += 64;
+                }
             }
         }
     }
