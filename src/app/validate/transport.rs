@@ -20,7 +20,7 @@
 //! long enough run always finds; a bug — a missing light, a wrong pdf, a
 //! wrong MIS weight — moves a region by more than 2 %.
 
-use super::stats::{mean_var, sidak, t_quantile, welch};
+use super::stats::{lone_share, mean_var, sidak, t_quantile, welch};
 use super::{Check, Status};
 use crate::accel::{self, BackendKind, Traversal};
 use crate::app::cli::flags::Flags;
@@ -109,13 +109,20 @@ struct Tests {
     /// The variances of the two sides' replicate means in the test whose
     /// interval is widest against its tolerance: how to share samples.
     bottleneck: (f64, f64),
+    /// Where that test's variance is mostly one render's (`lone_share`
+    /// above `LONE`): which side, render and region, and the share.
+    lone: Option<String>,
 }
+
+/// A test whose variance is more than this share one replicate's is said
+/// to be held up by a rare bright sample (`stats::lone_share`).
+const LONE: f64 = 0.6;
 
 /// Judge the replicates' region means `ma` against `mb`.
 fn judge(a: &str, b: &str, ma: &[Vec<[f64; 3]>], mb: &[Vec<[f64; 3]>]) -> Tests {
     let regions = ma[0].len();
     let level = sidak(ALPHA, regions * 3);
-    let mut out = Tests { differ: Vec::new(), undecided: Vec::new(), details: Vec::new(), widest: 0.0, lit: false, needs_half: 1.0, bottleneck: (0.0, 0.0) };
+    let mut out = Tests { differ: Vec::new(), undecided: Vec::new(), details: Vec::new(), widest: 0.0, lit: false, needs_half: 1.0, bottleneck: (0.0, 0.0), lone: None };
     for r in 0..regions {
         for c in 0..3 {
             let xa: Vec<f64> = ma.iter().map(|m| m[r][c]).collect();
@@ -136,6 +143,10 @@ fn judge(a: &str, b: &str, ma: &[Vec<[f64; 3]>], mb: &[Vec<[f64; 3]>]) -> Tests 
                 if needs > out.needs_half {
                     out.needs_half = needs;
                     out.bottleneck = (mean_var(&xa).1, mean_var(&xb).1);
+                    // The side whose variance dominates, if one render holds most of it.
+                    let (side, xs) = if out.bottleneck.0 >= out.bottleneck.1 { (a, &xa) } else { (b, &xb) };
+                    let (k, share) = lone_share(xs);
+                    out.lone = (share > LONE).then(|| format!("render {} of {} of {side} holds {:.0} % of its variance in {label}, channel {}", k + 1, xs.len(), 100.0 * share, ["R", "G", "B"][c]));
                 }
             }
             if tol > 0.0 && d.abs() - half > tol {
@@ -218,7 +229,12 @@ pub fn compare_estimators(name: &str, a: &Estimator, b: &Estimator, budget: Dura
     } else if !tests.lit {
         (Status::Unresolved, format!("the image is black: nothing to compare ({setting})"))
     } else if !tests.undecided.is_empty() {
-        let more = format!("about {:.0} times the samples would (a --budget about {:.0} times larger)", tests.needs_half.ceil(), (tests.needs_half * seconds / total).max(1.0).ceil());
+        let mut more = format!("about {:.0} times the samples would (a --budget about {:.0} times larger)", tests.needs_half.ceil(), (tests.needs_half * seconds / total).max(1.0).ceil());
+        if let Some(lone) = &tests.lone {
+            // A heavy tail: the figure above comes from one render's rare
+            // sample, and more samples settle it only slowly.
+            more = format!("{lone}: a rare, very bright sample (light that reaches a surface from a point light or a small bright light very close to it is typical), so the interval is as wide as that one sample makes it and more samples narrow it only slowly; {more}");
+        }
         if optional {
             // The pilot underestimated it; what it tests is covered by the
             // other comparisons, so it does not hold the verdict.
@@ -298,4 +314,28 @@ pub fn run(scene: &Scene, camera: &Camera, env: Option<Arc<EnvMap>>, f: &Flags, 
         checks.push(c);
     }
     Ok(checks)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn replicates(n: usize, phase: f64) -> Vec<Vec<[f64; 3]>> {
+        let regions = (GRID.0 * GRID.1 + 1) as usize;
+        (0..n).map(|k| (0..regions).map(|r| [0, 1, 2].map(|c| 1.0 + 1e-3 * ((k * 7 + r * 3 + c) as f64 + phase).sin())).collect()).collect()
+    }
+
+    /// One render's rare bright sample leaves the test undecided, and the
+    /// verdict says which render holds the variance; without it, none is named.
+    #[test]
+    fn a_lone_bright_render_is_named() {
+        let (a, mut b) = (replicates(15, 0.0), replicates(15, 0.5));
+        let calm = judge("path tracer", "BDPT", &a, &b);
+        assert!(calm.differ.is_empty() && calm.undecided.is_empty() && calm.lone.is_none(), "{:?} {:?}", calm.undecided, calm.lone);
+        b[9][3][0] += 0.5;
+        let t = judge("path tracer", "BDPT", &a, &b);
+        assert!(t.differ.is_empty() && !t.undecided.is_empty(), "{:?}", t.details);
+        let lone = t.lone.expect("the bright render is named");
+        assert!(lone.contains("render 10 of 15 of BDPT") && lone.contains("region 4 of 4x3, channel R"), "{lone}");
+    }
 }
