@@ -115,14 +115,18 @@ fn an_integrator_missing_a_light_fails_the_transport_check() {
 }
 
 /// The whole command on a shipped scene: every check passes within its
-/// budget, and the JUnit file parses and says the same.
+/// budget, and the JUnit file parses and says the same. The scene's light
+/// is an area light: CBempty's point light, 1 cm under its ceiling, gives
+/// the path tracer rare samples thousands of times the usual (one in about
+/// 15 renders of 1144 samples a pixel), which left this comparison
+/// undecided now and then within the budget.
 #[test]
 fn validate_passes_on_a_shipped_scene_and_writes_well_formed_junit() {
     let _machine = MACHINE.lock().unwrap_or_else(|e| e.into_inner());
     let dir = std::env::temp_dir().join(format!("pt-validate-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let out = Command::new(env!("CARGO_BIN_EXE_pathtracer"))
-        .args(["validate", "scenes/cs184/sky/CBempty.dae", "-m", "2", "--budget", "90s", "--references", "none", "--report"])
+        .args(["validate", "scenes/cs184/sky/CBspheres_lambertian.dae", "-m", "2", "--budget", "90s", "--references", "none", "--report"])
         .arg(&dir)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .env("CI", "true")
