@@ -117,9 +117,10 @@ fn an_integrator_missing_a_light_fails_the_transport_check() {
 /// The whole command on a shipped scene: every check passes within its
 /// budget, and the JUnit file parses and says the same. The scene's light
 /// is an area light: CBempty's point light, 1 cm under its ceiling, gives
-/// the path tracer rare samples thousands of times the usual (one in about
-/// 15 renders of 1144 samples a pixel), which left this comparison
-/// undecided now and then within the budget.
+/// the path tracer rare samples thousands of times the usual (one of 15
+/// renders of 1144 samples a pixel held one in the run it left
+/// undecided), which left this comparison undecided now and then within
+/// the budget.
 #[test]
 fn validate_passes_on_a_shipped_scene_and_writes_well_formed_junit() {
     let _machine = MACHINE.lock().unwrap_or_else(|e| e.into_inner());

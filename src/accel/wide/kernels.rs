@@ -85,7 +85,13 @@ pub(super) fn nearest_first_keys<const W: usize, const AVX: bool>(near: &[f32; W
     nearest_first_keys_scalar(near, mask)
 }
 
-/// The lane a `nearest_first_keys` key stands for.
+/// The `nearest_first_keys` key of `lane`, entered at distance `near`.
+#[inline(always)]
+fn child_key(near: f32, lane: u32) -> u32 {
+    near.to_bits() & !7 | (7 - lane)
+}
+
+/// The lane a `nearest_first_keys` key stands for (`child_key`'s inverse).
 #[inline(always)]
 pub(super) fn key_lane(key: u32) -> usize {
     (7 - (key & 7)) as usize
@@ -100,7 +106,7 @@ fn three_nearest_first<const W: usize>(near: &[f32; W], mask: u32) -> [u32; 3] {
         if m == 0 {
             u32::MAX
         } else {
-            near[lane as usize].to_bits() & !7 | (7 - lane)
+            child_key(near[lane as usize], lane)
         }
     };
     let m1 = mask & mask.wrapping_sub(1);
@@ -118,7 +124,7 @@ fn nearest_first_keys_scalar<const W: usize>(near: &[f32; W], mask: u32) -> [u32
     let mut keys = [u32::MAX; W];
     for (lane, k) in keys.iter_mut().enumerate() {
         if mask >> lane & 1 != 0 {
-            *k = near[lane].to_bits() & !7 | (7 - lane as u32);
+            *k = child_key(near[lane], lane as u32);
         }
     }
     keys.sort_unstable();

@@ -116,28 +116,28 @@ impl<const W: usize> WideBvh<W> {
     /// branches are likely well predicted) ran 2-5 % slower.
     #[inline(always)]
     pub(super) fn push_entered<const AVX: bool>(&self, stack: &mut WalkStack<()>, sp: &mut usize, node: &Node<W>, mask: u32, near: &[f32; W], order: ChildOrder) {
+        let mut push = |sp: &mut usize, lane: usize| {
+            let code = node.child[lane];
+            self.prefetch(code);
+            stack.push(sp, code, near[lane], ());
+        };
         if order == ChildOrder::NearestFirst {
             let keys = nearest_first_keys::<W, AVX>(near, mask);
             // The farthest pushed first, the nearest on top.
             for &key in keys[..mask.count_ones() as usize].iter().rev() {
-                let lane = key_lane(key);
-                let code = node.child[lane];
-                self.prefetch(code);
-                stack.push(sp, code, near[lane], ());
+                push(sp, key_lane(key));
             }
             return;
         }
         let mark = *sp;
         let mut m = mask;
         while m != 0 {
-            let lane = m.trailing_zeros() as usize;
+            push(sp, m.trailing_zeros() as usize);
             m &= m - 1;
-            let code = node.child[lane];
-            self.prefetch(code);
-            stack.push(sp, code, near[lane], ());
         }
         stack.order_since(mark, *sp, order);
     }
+
 }
 
 /// The order a node's entered children are visited in.
