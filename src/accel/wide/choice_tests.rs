@@ -53,13 +53,14 @@ fn cold_lines_estimate_matches_the_exact_sum() {
 
 /// Which closest-hit batches are interleaved follows the tree's size and
 /// its cold lines: none on a small mesh (1.9 MB) or on the architecture
-/// scene (mostly cached: 13 MB, 0.3 cold lines), the incoherent ones on a
-/// 100k-triangle mesh (6.6 MB, 10 cold lines), every one on a mesh above
+/// scene (mostly cached: 13 MB, 0.3 cold lines), the incoherent ones on
+/// 50k- and 100k-triangle meshes (3.3 and 6.6 MB, 7 and 10 cold lines),
+/// every one on a mesh above
 /// `INTERLEAVE_BYTES`; and the policy's batch way with them.
 #[test]
 fn interleaving_reaches_incoherent_batches_on_middling_trees() {
     use super::interleave::{InterleaveReach, INTERLEAVE_BYTES, INTERLEAVE_INCOHERENT_BYTES};
-    for (spec, want) in [("sphere:30k", InterleaveReach::None), ("arch:200k", InterleaveReach::None), ("sphere:100k", InterleaveReach::Incoherent), ("sphere:300k", InterleaveReach::All)] {
+    for (spec, want) in [("sphere:30k", InterleaveReach::None), ("arch:200k", InterleaveReach::None), ("sphere:50k", InterleaveReach::Incoherent), ("sphere:100k", InterleaveReach::Incoherent), ("sphere:300k", InterleaveReach::All)] {
         let b = WideBvh::<8>::build(&crate::scene::generated::for_tests(spec).shapes);
         let bytes = crate::accel::Traversal::memory_bytes(&b);
         assert_eq!(b.interleave_reach(), want, "{spec}: {bytes} bytes");

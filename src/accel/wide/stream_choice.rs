@@ -378,7 +378,7 @@ mod tests {
 
     /// Scattered batches skip the first stream only on trees where no
     /// random batch's first stream would have shared its nodes (cow,
-    /// maxplanck, the stadium), and try it where some do (CBbunny, the
+    /// beetle, the stadium), and try it where some do (CBbunny, the
     /// architecture scene): the choice made from the tree's own sample
     /// (`scattered_batches`) agrees with the benchmark's random batches;
     /// a tree built again chooses the same.
@@ -388,7 +388,7 @@ mod tests {
             return;
         }
         let file = |name: &str| crate::scene::load_file(&crate::scene::generated::in_repository(name).unwrap()).unwrap();
-        let scenes = [("CBbunny", file("CBbunny")), ("cow", file("cow")), ("maxplanck", file("maxplanck")), ("arch:200k", load_bench_scene("arch:200k")), ("stadium:200k", load_bench_scene("stadium:200k"))];
+        let scenes = [("CBbunny", file("CBbunny")), ("cow", file("cow")), ("beetle", file("beetle")), ("arch:200k", load_bench_scene("arch:200k")), ("stadium:200k", load_bench_scene("stadium:200k"))];
         for (name, scene) in scenes {
             let bvh = WideBvh::<8>::build(&scene.shapes);
             // SAFETY: after `avx_or_skip`.
