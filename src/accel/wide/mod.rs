@@ -43,7 +43,7 @@
 macro_rules! avx_twins {
     (
         $(#[$doc:meta])*
-        fn $name:ident / $avx2:ident / $avx512vl:ident (&$self:ident $(, $a:ident: $t:ty)*)
+        fn $name:ident / $avx2:ident / $avx512vl:ident (&$self:ident $(, $a:ident: $t:ty)*) $(-> [$ret:ty])?
         $(#[$twin:meta])*
         $body:block
     ) => {
@@ -52,7 +52,7 @@ macro_rules! avx_twins {
         /// # Safety
         /// The policy must run the AVX2 kernels (`self.policy.avx()`).
         #[cfg(target_arch = "x86_64")]
-        pub(super) unsafe fn $name(&$self $(, $a: $t)*) {
+        pub(super) unsafe fn $name(&$self $(, $a: $t)*) $(-> $ret)? {
             if $self.policy.avx512vl() {
                 $self.$avx512vl($($a),*)
             } else {
@@ -64,13 +64,13 @@ macro_rules! avx_twins {
         $(#[$twin])*
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
-        unsafe fn $avx2(&$self $(, $a: $t)*) $body
+        unsafe fn $avx2(&$self $(, $a: $t)*) $(-> $ret)? $body
 
         #[doc = concat!("`", stringify!($name), "` compiled for AVX2 and AVX-512VL: the CPU must have AVX-512F, VL, BW and DQ (`Policy::avx512vl`).")]
         $(#[$twin])*
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
-        unsafe fn $avx512vl(&$self $(, $a: $t)*) $body
+        unsafe fn $avx512vl(&$self $(, $a: $t)*) $(-> $ret)? $body
     };
 }
 
@@ -406,15 +406,11 @@ impl<const W: usize> Traversal for WideBvh<W> {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
         // Not through `intersect_batch`: one ray gains nothing from the
         // interleaved walkers and would pay for setting them up.
-        let mut hit = [None];
-        self.closest_all_simd(std::slice::from_ref(ray), &mut hit);
-        hit[0]
+        self.closest_one_simd(ray)
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        let mut out = [false];
-        self.occluded_batch(std::slice::from_ref(ray), &mut out);
-        out[0]
+        self.any_one_simd(ray)
     }
 
     fn intersect_batch(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {

@@ -279,30 +279,75 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    /// `closest_all` with the policy's kernels.
-    pub(super) fn closest_all_simd(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+    /// The closest hit of one ray (`None` for an invalid one) with the
+    /// policy's kernels. Inlined into `intersect`, each way's walk out of
+    /// line: with the scalar walk inlined too, `intersect` had a 6 KiB
+    /// frame, realigned and probed on every call; and not as a batch of
+    /// one, whose loop and hit written to memory cost a little more. The
+    /// one-ray calls gained 1-11 % (docs/notes/2026-12-02-one-ray-calls.md).
+    #[inline(always)]
+    pub(super) fn closest_one_simd(&self, ray: &Ray) -> Option<Hit> {
         #[cfg(target_arch = "x86_64")]
         if self.policy.avx() {
             // SAFETY: checked just now.
-            return unsafe { self.closest_all_avx(rays, hits) };
+            return unsafe { self.closest_one_avx(ray) };
         }
-        self.closest_all::<false>(rays, hits)
+        self.closest_one_scalar(ray)
     }
 
-    /// `any_all` with the policy's kernels.
+    /// Whether one ray is occluded, as `closest_one_simd`.
+    #[inline(always)]
+    pub(super) fn any_one_simd(&self, ray: &Ray) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.policy.avx() {
+            // SAFETY: checked just now.
+            return unsafe { self.any_one_avx(ray) };
+        }
+        self.any_one_scalar(ray)
+    }
+
+    /// `any_all` with the policy's kernels, each way out of line (as
+    /// `closest_one_simd`).
+    #[inline(always)]
     pub(super) fn any_all_simd(&self, rays: &[Ray], out: &mut [bool]) {
         #[cfg(target_arch = "x86_64")]
         if self.policy.avx() {
             // SAFETY: checked just now.
             return unsafe { self.any_all_avx(rays, out) };
         }
+        self.any_all_scalar(rays, out)
+    }
+
+    #[inline(never)]
+    fn closest_one_scalar(&self, ray: &Ray) -> Option<Hit> {
+        if ray.is_valid() { self.closest::<false>(ray) } else { None }
+    }
+
+    #[inline(never)]
+    fn any_one_scalar(&self, ray: &Ray) -> bool {
+        ray.is_valid() && self.any::<false>(ray, self.policy.any_order)
+    }
+
+    #[inline(never)]
+    fn any_all_scalar(&self, rays: &[Ray], out: &mut [bool]) {
         self.any_all::<false>(rays, out)
     }
 
     avx_twins! {
-        /// `closest_all` with the AVX2 kernels.
-        fn closest_all_avx / closest_all_avx2 / closest_all_avx512vl(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-            self.closest_all::<true>(rays, hits)
+        /// `closest_one_simd` with the AVX2 kernels.
+        fn closest_one_avx / closest_one_avx2 / closest_one_avx512vl(&self, ray: &Ray) -> [Option<Hit>]
+        #[inline(never)]
+        {
+            if ray.is_valid() { self.closest::<true>(ray) } else { None }
+        }
+    }
+
+    avx_twins! {
+        /// `any_one_simd` with the AVX2 kernels.
+        fn any_one_avx / any_one_avx2 / any_one_avx512vl(&self, ray: &Ray) -> [bool]
+        #[inline(never)]
+        {
+            ray.is_valid() && self.any::<true>(ray, self.policy.any_order)
         }
     }
 
