@@ -284,7 +284,8 @@ impl<const W: usize> WideBvh<W> {
     /// line: with the scalar walk inlined too, `intersect` had a 6 KiB
     /// frame, realigned and probed on every call; and not as a batch of
     /// one, whose loop and hit written to memory cost a little more. The
-    /// one-ray calls gained 1-11 % (docs/notes/2026-12-02-one-ray-calls.md).
+    /// one-ray calls gained up to 11 % (arch's random rays; grass's diffuse
+    /// rays level), docs/notes/2026-12-02-one-ray-calls.md.
     #[inline(always)]
     pub(super) fn closest_one_simd(&self, ray: &Ray) -> Option<Hit> {
         #[cfg(target_arch = "x86_64")]
