@@ -55,8 +55,8 @@ fn cold_lines_estimate_matches_the_exact_sum() {
 /// its cold lines: none on a small mesh (1.9 MB) or on the architecture
 /// scene (mostly cached: 13 MB, 0.3 cold lines), the incoherent ones on
 /// 50k- and 100k-triangle meshes (3.3 and 6.6 MB, 7 and 10 cold lines),
-/// every one on a mesh above
-/// `INTERLEAVE_BYTES`; and the policy's batch way with them.
+/// every one on a mesh above `INTERLEAVE_BYTES`; and the policy's batch
+/// way with them.
 #[test]
 fn interleaving_reaches_incoherent_batches_on_middling_trees() {
     use super::interleave::{InterleaveReach, INTERLEAVE_BYTES, INTERLEAVE_INCOHERENT_BYTES};

@@ -56,9 +56,10 @@ pub(super) const COLD_LINES: f64 = 3.0;
 /// sphere 200k 0.82-0.94 / 1.18-1.34 (12.7 MB, 13.1), grass 200k
 /// 0.84-1.09 / 1.72-1.76 (13.2 MB, 34.2), sphere 100k 0.79-0.90 /
 /// 0.98-1.22 (6.6 MB, 10.2); camera and diffuse batches unchanged. Below
-/// 4 MiB, where the rule first began, mixed then (two runs each): sphere 50k 0.77-0.91 / 0.86-1.00 (3.3
-/// MB, 6.9), maxplanck 0.74-0.87 / 0.86-0.94 (3.4 MB, 7.5); and the small
-/// scans (cow, beetle, CBbunny, under 2 MB) lost 9-17 %. Since the walkers
+/// 4 MiB, where the rule first began, mixed then (two runs each): sphere
+/// 50k 0.77-0.91 / 0.86-1.00 (3.3 MB, 6.9), maxplanck 0.74-0.87 /
+/// 0.86-0.94 (3.4 MB, 7.5); and the small scans (cow, beetle, CBbunny,
+/// under 2 MB) lost 9-17 %. Since the walkers
 /// prefetch what they enter, the same kind of machine (2-vCPU Zen 3 EPYC,
 /// random batches, the way chosen below this size / interleaved, two runs
 /// each, 2026-12-02) reads sphere 30k 0.95-0.97 / 1.02-1.03 (1.9 MB, 3.6 cold

@@ -39,7 +39,9 @@
 /// the one the policy chose: the kernels' intrinsics inline only into
 /// functions built with their features, so each twin is the always-inlined
 /// walk compiled for its instruction set. The documentation given goes on
-/// the chooser, the attributes after the parameters on both twins.
+/// the chooser, the attributes after the parameters on both twins; a
+/// return type is written in brackets (`-> [Option<Hit>]`), which lets
+/// the attributes follow it.
 macro_rules! avx_twins {
     (
         $(#[$doc:meta])*

@@ -319,16 +319,19 @@ impl<const W: usize> WideBvh<W> {
         self.any_all_scalar(rays, out)
     }
 
+    /// `closest_one_simd` without AVX2.
     #[inline(never)]
     fn closest_one_scalar(&self, ray: &Ray) -> Option<Hit> {
         if ray.is_valid() { self.closest::<false>(ray) } else { None }
     }
 
+    /// `any_one_simd` without AVX2.
     #[inline(never)]
     fn any_one_scalar(&self, ray: &Ray) -> bool {
         ray.is_valid() && self.any::<false>(ray, self.policy.any_order)
     }
 
+    /// `any_all_simd` without AVX2.
     #[inline(never)]
     fn any_all_scalar(&self, rays: &[Ray], out: &mut [bool]) {
         self.any_all::<false>(rays, out)
