@@ -67,8 +67,10 @@ pub(super) const COLD_LINES: f64 = 3.0;
 /// 0.88-0.93 / 1.13-1.26, maxplanck 0.93-0.99 / 1.10-1.12 (its diffuse
 /// batches, which stream, 1.26-1.40 either way); CBbunny (1.8 MB, 0.6 cold
 /// lines) 1.16-1.18 / 0.87-0.90, cow and beetle (0.4-0.5 MB, no cold
-/// lines) 1.02-1.09 / 0.85-0.89. Hence 2 MiB, the cold lines deciding
-/// above it.
+/// lines) 1.02-1.09 / 0.85-0.89, each in one process alternating with
+/// Embree every 8192 rays. The bench, alternating whole passes (each tree
+/// warm in the caches), reads maxplanck level and sphere 50k +14 %. Hence
+/// 2 MiB, the cold lines deciding above it.
 pub(super) const INTERLEAVE_INCOHERENT_BYTES: usize = 2 << 20;
 
 /// Rays in flight per thread. With each walker prefetching the one child
