@@ -59,18 +59,12 @@ pub(super) const COLD_LINES: f64 = 3.0;
 /// 4 MiB, where the rule first began, mixed then (two runs each): sphere
 /// 50k 0.77-0.91 / 0.86-1.00 (3.3 MB, 6.9), maxplanck 0.74-0.87 /
 /// 0.86-0.94 (3.4 MB, 7.5); and the small scans (cow, beetle, CBbunny,
-/// under 2 MB) lost 9-17 %. Since the walkers
-/// prefetch what they enter, the same kind of machine (2-vCPU Zen 3 EPYC,
-/// random batches, the way chosen below this size / interleaved, two runs
-/// each, 2026-12-02) reads sphere 30k 0.95-0.97 / 1.02-1.03 (1.9 MB, 3.6 cold
-/// lines), sphere 40k 0.93 / 1.06-1.09 (2.6 MB, 5.8), sphere 50k
-/// 0.88-0.93 / 1.13-1.26, maxplanck 0.93-0.99 / 1.10-1.12 (its diffuse
-/// batches, which stream, 1.26-1.40 either way); CBbunny (1.8 MB, 0.6 cold
-/// lines) 1.16-1.18 / 0.87-0.90, cow and beetle (0.4-0.5 MB, no cold
-/// lines) 1.02-1.09 / 0.85-0.89, each in one process alternating with
-/// Embree every 8192 rays. The bench, alternating whole passes (each tree
-/// warm in the caches), reads maxplanck level and sphere 50k +14 %. Hence
-/// 2 MiB, the cold lines deciding above it.
+/// under 2 MB) lost 9-17 %. Since the walkers prefetch what they enter,
+/// trees from 2 MiB with the cold lines gain too (random batches of sphere
+/// 50k and maxplanck +18-35 % in one process alternating with Embree every
+/// 8192 rays; in the bench, each tree warm in the caches, sphere 50k +14 %,
+/// maxplanck level) while CBbunny (1.8 MB, 0.6 cold lines) and the scans
+/// under 1 MB lose 13-26 %: docs/notes/2026-12-02-one-ray-calls.md.
 pub(super) const INTERLEAVE_INCOHERENT_BYTES: usize = 2 << 20;
 
 /// Rays in flight per thread. With each walker prefetching the one child

@@ -260,10 +260,22 @@ impl<const W: usize> WideBvh<W> {
         (self.any_work(&sample.shadow, ChildOrder::FarthestFirst), self.any_work(&sample.shadow, ChildOrder::NearestFirst))
     }
 
+    /// The closest hit of `ray`, `None` for an invalid one.
+    #[inline(always)]
+    fn closest_if_valid<const AVX: bool>(&self, ray: &Ray) -> Option<Hit> {
+        if ray.is_valid() { self.closest::<AVX>(ray) } else { None }
+    }
+
+    /// Whether `ray` is valid and occluded, its walk in `order`.
+    #[inline(always)]
+    fn any_if_valid<const AVX: bool>(&self, ray: &Ray, order: ChildOrder) -> bool {
+        ray.is_valid() && self.any::<AVX>(ray, order)
+    }
+
     #[inline(always)]
     pub(super) fn closest_all<const AVX: bool>(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         for (r, h) in rays.iter().zip(hits.iter_mut()) {
-            *h = if r.is_valid() { self.closest::<AVX>(r) } else { None };
+            *h = self.closest_if_valid::<AVX>(r);
         }
     }
 
@@ -275,7 +287,7 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     pub(super) fn any_all_ordered<const AVX: bool>(&self, rays: &[Ray], out: &mut [bool], order: ChildOrder) {
         for (r, o) in rays.iter().zip(out.iter_mut()) {
-            *o = r.is_valid() && self.any::<AVX>(r, order);
+            *o = self.any_if_valid::<AVX>(r, order);
         }
     }
 
@@ -322,13 +334,13 @@ impl<const W: usize> WideBvh<W> {
     /// `closest_one_simd` without AVX2.
     #[inline(never)]
     fn closest_one_scalar(&self, ray: &Ray) -> Option<Hit> {
-        if ray.is_valid() { self.closest::<false>(ray) } else { None }
+        self.closest_if_valid::<false>(ray)
     }
 
     /// `any_one_simd` without AVX2.
     #[inline(never)]
     fn any_one_scalar(&self, ray: &Ray) -> bool {
-        ray.is_valid() && self.any::<false>(ray, self.policy.any_order)
+        self.any_if_valid::<false>(ray, self.policy.any_order)
     }
 
     /// `any_all_simd` without AVX2.
@@ -342,7 +354,7 @@ impl<const W: usize> WideBvh<W> {
         fn closest_one_avx / closest_one_avx2 / closest_one_avx512vl(&self, ray: &Ray) -> [Option<Hit>]
         #[inline(never)]
         {
-            if ray.is_valid() { self.closest::<true>(ray) } else { None }
+            self.closest_if_valid::<true>(ray)
         }
     }
 
@@ -351,7 +363,7 @@ impl<const W: usize> WideBvh<W> {
         fn any_one_avx / any_one_avx2 / any_one_avx512vl(&self, ray: &Ray) -> [bool]
         #[inline(never)]
         {
-            ray.is_valid() && self.any::<true>(ray, self.policy.any_order)
+            self.any_if_valid::<true>(ray, self.policy.any_order)
         }
     }
 

@@ -137,7 +137,6 @@ impl<const W: usize> WideBvh<W> {
         }
         stack.order_since(mark, *sp, order);
     }
-
 }
 
 /// The order a node's entered children are visited in.
