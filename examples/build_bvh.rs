@@ -3,13 +3,15 @@
 //! two binaries against each other, without the bench's ray tables.
 //!
 //! ```text
-//! cargo run --release --example build_bvh -- SCENE BACKEND BUILDS
+//! cargo run --release --example build_bvh -- SCENE BACKEND BUILDS [EXPECTED_RAYS]
 //! perf record -g target/release/examples/build_bvh sphere:1M native 20
 //! ```
 //! Prints each build's wall time and the best. SCENE is a bench scene name
 //! or file, BACKEND a `--backend` value; builds use every thread (rayon's
 //! `RAYON_NUM_THREADS` limits them). The `PATHTRACER_NATIVE_*` switches
-//! apply as they do to `pathtracer`.
+//! apply as they do to `pathtracer`. EXPECTED_RAYS, as the bench passes
+//! it (its ray count over every pass), lets the native build weigh spatial
+//! splits; without it the build does not try them.
 
 use clap::ValueEnum;
 use pathtracer::accel::{self, BackendKind};
@@ -25,13 +27,18 @@ fn main() {
 
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let [scene, backend, builds] = args.as_slice() else {
-        return Err("usage: build_bvh SCENE BACKEND BUILDS".into());
+    let (scene, backend, builds, expected) = match args.as_slice() {
+        [s, b, n] => (s, b, n, None),
+        [s, b, n, e] => (s, b, n, Some(e)),
+        _ => return Err("usage: build_bvh SCENE BACKEND BUILDS [EXPECTED_RAYS]".into()),
     };
     let backend = BackendKind::from_str(backend, true)?;
     let builds: usize = builds.parse().map_err(|_| format!("BUILDS: not a count: {builds}"))?;
     let scene = load_bench_scene(scene).map_err(|e| e.to_string())?;
-    let options = accel::BuildOptions::from_lookup(0, |k| std::env::var(k).ok()).map_err(|e| e.to_string())?;
+    let mut options = accel::BuildOptions::from_lookup(0, |k| std::env::var(k).ok()).map_err(|e| e.to_string())?;
+    if let Some(e) = expected {
+        options.native.expected_rays = e.parse().map_err(|_| format!("EXPECTED_RAYS: not a count: {e}"))?;
+    }
     let mut times = Vec::with_capacity(builds);
     for _ in 0..builds {
         let start = Instant::now();

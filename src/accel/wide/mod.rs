@@ -319,8 +319,11 @@ impl<const W: usize> WideBvh<W> {
         false
     }
 
-    /// Start loading child `code`'s node (all its cache lines) or its first
-    /// triangle group before the traversal needs it.
+    /// Start loading child `code`'s node (all its cache lines) or an inline
+    /// leaf's triangle groups and their ids before the traversal needs
+    /// them. The ids sit apart from the groups and every hit lane reads
+    /// them (padding lanes are told apart there): unfetched, their loads
+    /// held 8 % of a one-ray walk's samples on sphere 1M's random rays.
     #[inline(always)]
     fn prefetch(&self, code: u32) {
         #[cfg(target_arch = "x86_64")]
@@ -341,6 +344,10 @@ impl<const W: usize> WideBvh<W> {
                     _mm_prefetch::<_MM_HINT_T0>(ptr.add(off));
                     off += 64;
                 }
+                let first = (code & INLINE_GROUP_LIMIT) as usize * LANES;
+                let ids = self.tree.ids.as_ptr().add(first) as *const i8;
+                _mm_prefetch::<_MM_HINT_T0>(ids);
+                _mm_prefetch::<_MM_HINT_T0>(ids.add(((code >> 28) & 3) as usize * LANES * 8 - 1));
             }
         }
     }
