@@ -337,17 +337,19 @@ impl<const W: usize> WideBvh<W> {
                     _mm_prefetch::<_MM_HINT_T0>(ptr.add(off));
                 }
             } else if code & INLINE_BIT != 0 {
-                let ptr = self.tree.groups.as_ptr().add((code & INLINE_GROUP_LIMIT) as usize) as *const i8;
-                let bytes = ((code >> 28) & 3) as usize * std::mem::size_of::<TriGroup>();
+                // An inline code decodes without a memory read (`leaf_of`).
+                let leaf = self.leaf_of(code);
+                let (first, n) = (leaf.group as usize, leaf.n_groups as usize);
+                let ptr = self.tree.groups.as_ptr().add(first) as *const i8;
+                let bytes = n * std::mem::size_of::<TriGroup>();
                 let mut off = 0;
                 while off < bytes {
                     _mm_prefetch::<_MM_HINT_T0>(ptr.add(off));
                     off += 64;
                 }
-                let first = (code & INLINE_GROUP_LIMIT) as usize * LANES;
-                let ids = self.tree.ids.as_ptr().add(first) as *const i8;
+                let ids = self.tree.ids.as_ptr().add(first * LANES) as *const i8;
                 _mm_prefetch::<_MM_HINT_T0>(ids);
-                _mm_prefetch::<_MM_HINT_T0>(ids.add(((code >> 28) & 3) as usize * LANES * 8 - 1));
+                _mm_prefetch::<_MM_HINT_T0>(ids.add(n * LANES * std::mem::size_of::<[u32; 2]>() - 1));
             }
         }
     }
