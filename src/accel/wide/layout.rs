@@ -20,7 +20,6 @@ pub(super) struct Arrays<const W: usize> {
     pub(super) nodes: Vec<Node<W>>,
     pub(super) leaves: Vec<Leaf>,
     pub(super) groups: Vec<TriGroup>,
-    pub(super) ids: Vec<[u32; 2]>,
     pub(super) spheres: Vec<Prim>,
 }
 
@@ -283,7 +282,6 @@ pub(super) fn flatten<const W: usize>(root: Piece<W>, refs: &[PrimRef], prims: &
         nodes: huge(total.nodes as usize),
         leaves: Vec::with_capacity(total.records as usize),
         groups: huge(total.groups as usize),
-        ids: huge(total.groups as usize * LANES),
         spheres: Vec::with_capacity(total.spheres as usize),
     };
     {
@@ -291,18 +289,17 @@ pub(super) fn flatten<const W: usize>(root: Piece<W>, refs: &[PrimRef], prims: &
         let mut nodes = &mut out.nodes.spare_capacity_mut()[..total.nodes as usize];
         let mut records = &mut out.leaves.spare_capacity_mut()[..total.records as usize];
         let mut groups = &mut out.groups.spare_capacity_mut()[..total.groups as usize];
-        let mut ids = &mut out.ids.spare_capacity_mut()[..total.groups as usize * LANES];
         let mut spheres = &mut out.spheres.spare_capacity_mut()[..total.spheres as usize];
         let jobs: Vec<_> = placed
             .iter()
             .map(|p| {
                 let a = p.part;
                 let g = a.groups as usize;
-                (p, take(&mut nodes, a.nodes.len()), take(&mut records, a.records as usize), take(&mut groups, g), take(&mut ids, g * LANES), take(&mut spheres, a.spheres as usize))
+                (p, take(&mut nodes, a.nodes.len()), take(&mut records, a.records as usize), take(&mut groups, g), take(&mut spheres, a.spheres as usize))
             })
             .collect();
-        jobs.into_par_iter().for_each(|(p, nodes, records, groups, ids, spheres)| {
-            let codes = write_leaves(p, refs, prims, records, groups, ids, spheres);
+        jobs.into_par_iter().for_each(|(p, nodes, records, groups, spheres)| {
+            let codes = write_leaves(p, refs, prims, records, groups, spheres);
             let base = p.base;
             for (dst, src) in nodes.iter_mut().zip(&p.part.nodes) {
                 let mut node = *src;
@@ -328,7 +325,6 @@ pub(super) fn flatten<const W: usize>(root: Piece<W>, refs: &[PrimRef], prims: &
         out.nodes.set_len(total.nodes as usize);
         out.leaves.set_len(total.records as usize);
         out.groups.set_len(total.groups as usize);
-        out.ids.set_len(total.groups as usize * LANES);
         out.spheres.set_len(total.spheres as usize);
     }
     (out, code)
@@ -343,7 +339,6 @@ fn write_leaves<const W: usize>(
     prims: &PrimTable,
     records: &mut [MaybeUninit<Leaf>],
     groups: &mut [MaybeUninit<TriGroup>],
-    ids: &mut [MaybeUninit<[u32; 2]>],
     spheres: &mut [MaybeUninit<Prim>],
 ) -> Vec<u32> {
     let base = p.base;
@@ -376,7 +371,7 @@ fn write_leaves<const W: usize>(
         sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
         let mut tris = sorted.iter().map(|x| x.1).peekable();
         while let Some(first) = tris.peek().copied() {
-            let mut tg = TriGroup { v: [[[0.0; LANES]; 3]; 3] };
+            let mut tg = TriGroup { v: [[[0.0; LANES]; 3]; 3], ids: [[EMPTY; 2]; LANES] };
             for lane in 0..LANES {
                 // Padding lanes repeat the group's first triangle; `ids` marks them empty.
                 let (q, real) = match tris.next() {
@@ -388,7 +383,7 @@ fn write_leaves<const W: usize>(
                         tg.v[k][a][lane] = q.v[k][a];
                     }
                 }
-                ids[g * LANES + lane].write(if real { [q.geom_id(), q.prim_id] } else { [EMPTY, EMPTY] });
+                tg.ids[lane] = if real { [q.geom_id(), q.prim_id] } else { [EMPTY, EMPTY] };
             }
             groups[g].write(tg);
             g += 1;

@@ -29,7 +29,7 @@ impl<const W: usize> WideBvh<W> {
         let mut left = rays_in;
         for gi in leaf.group..leaf.group + leaf.n_groups {
             let g = &self.tree.groups[gi as usize];
-            let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let ids = &g.ids;
             for (lane, id) in ids.iter().enumerate() {
                 if id[0] == EMPTY {
                     continue;
@@ -129,7 +129,7 @@ impl<const W: usize> WideBvh<W> {
         let mut found = [false; 2];
         for gi in leaf.group..leaf.group + leaf.n_groups {
             let g = &self.tree.groups[gi as usize];
-            let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let ids = &g.ids;
             let mut out = [[LaneHit::default(); LANES]; 2];
             let masks = intersect_group_x2(g, rt, sh, tmin, range, &mut out);
             take_hits::<false, 2>(ij, masks, &out, ids, &mut found, tmax, hits);
@@ -146,13 +146,8 @@ impl<const W: usize> WideBvh<W> {
         let mut found = [false; 2];
         for gi in leaf.group..leaf.group + leaf.n_groups {
             let g = &self.tree.groups[gi as usize];
-            // Padding lanes are told apart only for a hit: the ids sit apart
-            // from the vertices, and loading them for every group missed the
-            // caches (8 % of grass's streamed shadow rays).
-            let real = |m: u32| {
-                let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
-                m != 0 && (0..LANES).any(|l| m >> l & 1 != 0 && ids[l][0] != EMPTY)
-            };
+            // Padding lanes are told apart only for a hit.
+            let real = |m: u32| m != 0 && (0..LANES).any(|l| m >> l & 1 != 0 && g.ids[l][0] != EMPTY);
             let mut out = [[LaneHit::default(); LANES]; 2];
             if found[0] || found[1] {
                 // One ray is done: the other goes on alone.
@@ -190,7 +185,7 @@ impl<const W: usize> WideBvh<W> {
         let mut found = [false; 4];
         for gi in leaf.group..leaf.group + leaf.n_groups {
             let g = &self.tree.groups[gi as usize];
-            let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let ids = &g.ids;
             let mut out = [[LaneHit::default(); LANES]; 4];
             let masks = intersect_group_x4(g, rt, sh, tmin, range, &mut out);
             take_hits::<ANY, 4>(quad, masks, &out, ids, &mut found, tmax, hits);

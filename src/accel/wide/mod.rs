@@ -155,17 +155,20 @@ struct Node<const W: usize> {
     child: [u32; W],
 }
 
-/// Four triangles, SoA: `v[k][axis][lane]` is vertex k's coordinate.
+/// Four triangles, SoA: `v[k][axis][lane]` is vertex k's coordinate, and
+/// `ids[lane]` its triangle's (geometry id, primitive id), geometry `EMPTY`
+/// for padding. The ids sit beside the vertices, as in Embree's
+/// `Triangle4v`, so the lines a leaf's prefetch brings hold them too.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 struct TriGroup {
     v: [[[f32; LANES]; 3]; 3],
+    ids: [[u32; 2]; LANES],
 }
 
 #[derive(Clone, Copy, Debug)]
 struct Leaf {
-    /// Triangle groups `groups[group..group+n_groups]`; lane i of group g
-    /// is the triangle `ids[4*g + i]` (geometry, primitive), or padding.
+    /// Triangle groups `groups[group..group+n_groups]`.
     group: u32,
     n_groups: u32,
     /// Spheres: `spheres[sphere..sphere+n_spheres]`.
@@ -179,8 +182,6 @@ pub(super) struct Tree<const W: usize> {
     nodes: Vec<Node<W>>,
     leaves: Vec<Leaf>,
     groups: Vec<TriGroup>,
-    /// Per group lane: (geometry id, primitive id), geometry `EMPTY` for padding.
-    ids: Vec<[u32; 2]>,
     spheres: Vec<Prim>,
     /// The root: a node, or a leaf when the scene is tiny.
     root: u32,
@@ -266,7 +267,7 @@ impl<const W: usize> WideBvh<W> {
             (out, root) = layout::flatten(layout::Piece { part, root: code }, &refs, prims);
         }
         let root_area = if root == EMPTY { 0.0 } else { bounds.half_area() as f64 };
-        Tree { nodes: out.nodes, leaves: out.leaves, groups: out.groups, ids: out.ids, spheres: out.spheres, root, bounds, root_area, root_diagonal: bounds.extent().length() }
+        Tree { nodes: out.nodes, leaves: out.leaves, groups: out.groups, spheres: out.spheres, root, bounds, root_area, root_diagonal: bounds.extent().length() }
     }
 
     /// `tree` with its policy under `options`, chosen from the tree through
@@ -297,7 +298,7 @@ impl<const W: usize> WideBvh<W> {
     fn leaf<F: FnMut(Hit) -> bool>(&self, leaf: &Leaf, ray: &Ray, rt: &RayTransform, shear: &Shear, tmax: f32, visit: &mut F) -> bool {
         for gi in leaf.group..leaf.group + leaf.n_groups {
             let g = &self.tree.groups[gi as usize];
-            let ids = &self.tree.ids[gi as usize * LANES..gi as usize * LANES + LANES];
+            let ids = &g.ids;
             let mut out = [LaneHit::default(); LANES];
             let mask = intersect_group(g, rt, shear, ray.tmin, tmax, &mut out);
             for lane in 0..LANES {
@@ -320,10 +321,8 @@ impl<const W: usize> WideBvh<W> {
     }
 
     /// Start loading child `code`'s node (all its cache lines) or an inline
-    /// leaf's triangle groups and their ids before the traversal needs
-    /// them. The ids sit apart from the groups and every hit lane reads
-    /// them (padding lanes are told apart there): unfetched, their loads
-    /// held 8 % of a one-ray walk's samples on sphere 1M's random rays.
+    /// leaf's triangle groups (their ids with them) before the traversal
+    /// needs them.
     #[inline(always)]
     fn prefetch(&self, code: u32) {
         #[cfg(target_arch = "x86_64")]
@@ -347,9 +346,6 @@ impl<const W: usize> WideBvh<W> {
                     _mm_prefetch::<_MM_HINT_T0>(ptr.add(off));
                     off += 64;
                 }
-                let ids = self.tree.ids.as_ptr().add(first * LANES) as *const i8;
-                _mm_prefetch::<_MM_HINT_T0>(ids);
-                _mm_prefetch::<_MM_HINT_T0>(ids.add(n * LANES * std::mem::size_of::<[u32; 2]>() - 1));
             }
         }
     }
@@ -410,7 +406,6 @@ impl<const W: usize> Traversal for WideBvh<W> {
         self.tree.nodes.len() * std::mem::size_of::<Node<W>>()
             + self.tree.leaves.len() * std::mem::size_of::<Leaf>()
             + self.tree.groups.len() * std::mem::size_of::<TriGroup>()
-            + self.tree.ids.len() * 8
             + self.tree.spheres.len() * std::mem::size_of::<Prim>()
     }
 

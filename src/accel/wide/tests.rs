@@ -152,7 +152,7 @@ fn spatial_split_trees_match_brute_force() {
     let want_occ: Vec<bool> = rays.iter().map(|r| brute.occluded(r)).collect();
     let plain = WideBvh::<8>::build_with_splits(&shapes, 0.0);
     let split = WideBvh::<8>::build_with_splits(&shapes, 0.5);
-    let refs = |b: &WideBvh<8>| b.tree.ids.iter().filter(|id| id[0] != EMPTY).count() + b.tree.spheres.len();
+    let refs = |b: &WideBvh<8>| b.tree.groups.iter().flat_map(|g| g.ids).filter(|id| id[0] != EMPTY).count() + b.tree.spheres.len();
     assert!(refs(&split) > refs(&plain), "no spatial split was made ({} references)", refs(&split));
     assert!(refs(&split) as f64 <= 1.5 * refs(&plain) as f64, "past the budget: {} references for {}", refs(&split), refs(&plain));
     let mut candidates: Vec<(&str, WideBvh<8>)> = vec![("default", split)];
@@ -434,7 +434,7 @@ fn a_tree_built_in_pieces_matches_brute_force_and_ignores_thread_count() {
     let bits = |b: &WideBvh<8>| {
         let mut v: Vec<u32> = b.tree.nodes.iter().flat_map(|n| n.bounds.iter().flatten().map(|f| f.to_bits()).chain(n.child)).collect();
         v.extend(b.tree.groups.iter().flat_map(|g| g.v.iter().flatten().flatten().map(|f| f.to_bits())));
-        v.extend(b.tree.ids.iter().flatten());
+        v.extend(b.tree.groups.iter().flat_map(|g| g.ids).flatten());
         v.extend(b.tree.leaves.iter().flat_map(|l| [l.group, l.n_groups, l.sphere, l.n_spheres]));
         v.push(b.tree.root);
         v

@@ -80,7 +80,7 @@ fn eight_rays_against_one_triangle_equal_the_single_ray_test() {
         [Vec3::new(-0.3, 0.2, -0.4), Vec3::new(1.7, 0.1, 0.6), Vec3::new(0.4, 1.9, 0.2)],
         [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.5, 0.5, 0.0), Vec3::new(1.0, 1.0, 0.0)],
     ];
-    let mut g = TriGroup { v: [[[0.0; 4]; 3]; 3] };
+    let mut g = TriGroup { v: [[[0.0; 4]; 3]; 3], ids: [[0, 0]; 4] };
     for (lane, t) in tris.iter().enumerate() {
         for (vert, p) in t.iter().enumerate() {
             for a in 0..3 {
