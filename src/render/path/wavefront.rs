@@ -17,6 +17,7 @@ use crate::accel::{Hit, Traversal};
 use crate::light::emitted;
 use crate::ray::Ray;
 use crate::sampler::Sampler;
+use crate::scene::interaction::HitFetch;
 use crate::scene::Interaction;
 use glam::Vec3;
 
@@ -52,6 +53,13 @@ impl Tracing {
         }
     }
 }
+
+/// How many closest-hit rays ahead of the path being gathered a hit's
+/// vertex indices, then its vertices, are fetched (`Scene::prefetch_hit`):
+/// enough paths' work to cover a miss each step, few enough that the lines
+/// are still cached when described.
+const FETCH_INDICES_AHEAD: usize = 8;
+const FETCH_VERTICES_AHEAD: usize = 4;
 
 /// One path between bounces.
 struct Path {
@@ -145,6 +153,13 @@ impl<'a> PathTracer<'a> {
                 // (moving it out and back was 5 % of a CBspheres render in
                 // memcpy).
                 let Some(v) = &p.v else { continue };
+                if let Some((k, _)) = p.next {
+                    for (ahead, step) in [(FETCH_INDICES_AHEAD, HitFetch::Indices), (FETCH_VERTICES_AHEAD, HitFetch::Vertices)] {
+                        if let Some(Some(h)) = found.get(k + ahead) {
+                            self.scene.prefetch_hit(h, step);
+                        }
+                    }
+                }
                 if p.counted {
                     p.l += p.beta * self.replay(accel, &terms[p.terms.clone()], &occluded, &closest, &found);
                 }
