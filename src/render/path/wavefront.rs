@@ -118,6 +118,7 @@ impl<'a> PathTracer<'a> {
         let (mut occluded, mut found): (Vec<bool>, Vec<Option<Hit>>) = (Vec::with_capacity(n * per_light), Vec::with_capacity(n * (1 + hemi)));
         let mut terms: Vec<Term> = Vec::with_capacity(n * (per_light + self.lights.lights.len() + hemi + 1));
         let mut guide_slot = None;
+        let fetch_hits = self.scene.hits_miss_caches();
         loop {
             shadow.clear();
             closest.clear();
@@ -153,7 +154,7 @@ impl<'a> PathTracer<'a> {
                 // (moving it out and back was 5 % of a CBspheres render in
                 // memcpy).
                 let Some(v) = &p.v else { continue };
-                if let Some((k, _)) = p.next {
+                if let Some((k, _)) = p.next.filter(|_| fetch_hits) {
                     for (ahead, step) in [(FETCH_INDICES_AHEAD, HitFetch::Indices), (FETCH_VERTICES_AHEAD, HitFetch::Vertices)] {
                         if let Some(Some(h)) = found.get(k + ahead) {
                             self.scene.prefetch_hit(h, step);
