@@ -15,7 +15,8 @@
 //! * on trees that stay in the caches, a batch whose rays start far apart
 //!   (`origins_scattered`) tries no first stream where streams of rays
 //!   from anywhere in the tree's box fell well short when it was built
-//!   (`scattered_batches`).
+//!   (`scattered_batches`), or where the tree is large
+//!   (`SCATTERED_ALONE_BYTES`).
 //!
 //! No way changes an answer (each gives the single-ray walk's hits).
 
@@ -81,6 +82,19 @@ const SCATTER_SAMPLE: usize = 2048;
 /// against one ray at a time, in one process). The same rays' streams read
 /// within 5 % at 512 and 8192 rays but on arch (6.82 at 512).
 const SCATTERED_MAY_SHARE: (u64, u64) = (27, 8);
+
+/// Trees from this size on whose rays stay in the caches (else they would
+/// interleave: `interleave_reach`) trace scattered batches one ray at a
+/// time: a stream's shared fetches hit the caches there too, and buy less
+/// than its bookkeeping costs. The architecture scene's streams of random
+/// rays share as CBbunny's do (5.8 tests per fetch), yet in the bench
+/// (`pathtracer bench arch:2M arch:10M stadium:2M --backends
+/// native,embree4 --no-render --throughput-only --threads 1`, 2-vCPU AMD
+/// EPYC, Zen 3, two runs of each binary, native ÷ Embree 4) its random
+/// batches read 0.97-0.99 (2M) and 0.97-0.98 (10M) trying a first stream,
+/// 1.04-1.05 and 1.03-1.04 one ray at a time; diffuse batches and the
+/// stadium (whose sample already said one at a time) unchanged.
+const SCATTERED_ALONE_BYTES: usize = super::interleave::INTERLEAVE_BYTES;
 
 impl StreamWork {
     /// Whether the stream's rays shared its nodes enough to go on in
@@ -157,13 +171,15 @@ impl<const W: usize> WideBvh<W> {
     /// Whether scattered batches try a first stream on this tree
     /// (`SCATTERED_MAY_SHARE`): counted over streams of `SCATTER_SAMPLE`
     /// rays from anywhere in the tree's box (as the benchmark's random
-    /// rays), fixed seed, so the same tree always decides the same.
+    /// rays), fixed seed, so the same tree always decides the same. Not on
+    /// a tree of `SCATTERED_ALONE_BYTES` or more, whatever its sample says.
     ///
     /// # Safety
     /// The CPU must have AVX2; `W` must be 8.
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn scattered_batches(&self) -> Scattered {
-        if self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
+        use super::Traversal;
+        if self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY || self.memory_bytes() >= SCATTERED_ALONE_BYTES {
             return Scattered::Single;
         }
         let rays = crate::accel::workloads::random_rays_in(&self.tree.bounds, SCATTER_SAMPLE, 0x5CA7);
@@ -405,6 +421,42 @@ mod tests {
             assert!(agrees, "{name}: {chosen:?}, but the random batches' first streams say {probes:?}");
             let expected = if name.starts_with("CBbunny") || name.starts_with("arch") { Scattered::TryStream } else { Scattered::Single };
             assert_eq!(chosen, expected, "{name}");
+        }
+    }
+
+
+    /// On a large tree whose rays stay in the caches (the architecture
+    /// scene at 300k triangles, above `SCATTERED_ALONE_BYTES`) scattered
+    /// batches go one ray at a time without a first stream, though the
+    /// tree's sample of such rays shares as much as at 200k triangles,
+    /// where they try one; a tile's diffuse rays still try theirs; every
+    /// batch finds the single-ray hits.
+    #[test]
+    fn large_cached_trees_trace_scattered_batches_alone() {
+        if !avx_or_skip("the closest-hit streams") {
+            return;
+        }
+        use crate::accel::Traversal;
+        let scene = load_bench_scene("arch:300k");
+        let bvh = WideBvh::<8>::build(&scene.shapes);
+        assert!(bvh.memory_bytes() >= SCATTERED_ALONE_BYTES, "the test needs a large tree: {} bytes", bvh.memory_bytes());
+        assert_eq!(bvh.interleave_reach(), super::super::interleave::InterleaveReach::None, "the test needs a tree whose rays stay cached");
+        // SAFETY: after `avx_or_skip`.
+        assert_eq!(unsafe { bvh.scattered_batches() }, Scattered::Single);
+        let way = Unshared::Single(Scattered::Single);
+        assert_eq!(bvh.policy.closest, ClosestBatches::StreamsWhereShared(way));
+        let random = crate::accel::workloads::random_rays(&scene, 4096, 2);
+        let probes: Vec<Option<bool>> = random.chunks(1024).map(|r| first_shared(&bvh, r, Unshared::Single(Scattered::TryStream))).collect();
+        assert!(probes.contains(&Some(true)), "the random batches' first streams would not have streamed: {probes:?}");
+        assert!(random.chunks(1024).all(|r| first_shared(&bvh, r, way).is_none()), "a random batch tries a stream");
+        let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
+        let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
+        assert!(diffuse.chunks(1024).any(|d| first_shared(&bvh, d, way).is_some()), "no tile tries a stream");
+        for rays in diffuse.chunks(1024).chain(random.chunks(1024)) {
+            let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
+            let mut got = vec![None; rays.len()];
+            bvh.intersect_batch(rays, &mut got);
+            assert!(got == want, "hits differ from single rays");
         }
     }
 
