@@ -92,11 +92,12 @@ const SCATTERED_MAY_SHARE: (u64, u64) = (27, 8);
 /// than its bookkeeping costs. The architecture scene's streams of random
 /// rays share as CBbunny's do (5.8 tests per fetch), yet in the bench
 /// (`pathtracer bench arch:2M arch:10M stadium:2M --backends
-/// native,embree4 --no-render --throughput-only --threads 1`, 2-vCPU AMD
-/// EPYC, Zen 3, two runs of each binary, native ÷ Embree 4) its random
-/// batches read 0.97-0.99 (2M) and 0.97-0.98 (10M) trying a first stream,
-/// 1.04-1.05 and 1.03-1.04 one ray at a time; diffuse batches and the
-/// stadium (whose sample already said one at a time) unchanged.
+/// native,embree4 --no-peers --no-render --throughput-only --threads 1`,
+/// 2-vCPU AMD EPYC, Zen 3, two runs of each binary, native ÷ Embree 4)
+/// its random batches read 0.97-0.99 (2M) and 0.97-0.98 (10M) trying a
+/// first stream, 1.04-1.05 and 1.03-1.04 one ray at a time; diffuse
+/// batches and the stadium (whose sample already said one at a time)
+/// unchanged.
 const SCATTERED_ALONE_BYTES: usize = super::interleave::INTERLEAVE_BYTES;
 
 impl StreamWork {
@@ -241,9 +242,10 @@ impl<const W: usize> WideBvh<W> {
     /// beat one ray at a time: the bench's diffuse batches, native ÷
     /// Embree 4, 1 thread (2-vCPU AMD EPYC, Zen 3, two runs), tried /
     /// untried: CBbunny 1.18 / 1.25-1.26, cow 1.48-1.50 / 1.56, beetle
-    /// 1.46 / 1.53; CBbunny's path-traced render 1.3 % faster. Not on the large trees: the architecture scene's tiles that
-    /// share little (a third) are faster one ray at a time (0.90-0.94
-    /// tried, 0.88-0.89 untried; the stadium 1.37 / 1.42). Scattered
+    /// 1.46 / 1.53; CBbunny's path-traced render 1.3 % faster. Not on the
+    /// large trees: the architecture scene's tiles that share little (a
+    /// third) are faster one ray at a time (0.90-0.94 tried, 0.88-0.89
+    /// untried; the stadium 1.37 / 1.42). Scattered
     /// batches still try theirs, or go one ray at a time (`Scattered`):
     /// streamed untried, cow's random batches read 0.88 against 1.05.
     pub(super) fn streams_untried(&self, rays: &[Ray], otherwise: Unshared) -> bool {
