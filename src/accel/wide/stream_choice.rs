@@ -389,6 +389,25 @@ mod tests {
     }
 
 
+    /// A tile's diffuse rays: the bounce rays of 256x192 camera rays' hits
+    /// in 32x32 tiles.
+    fn tile_rays(scene: &crate::scene::Scene, bvh: &WideBvh<8>) -> Vec<Ray> {
+        let cam = camera_rays(&Camera::from_scene(scene), 256, 192);
+        diffuse_rays(scene, bvh, &tile_order(&cam, 256, 192, 32), 3)
+    }
+
+
+    /// Each batch, traced the tree's default way, finds the single-ray hits.
+    fn assert_batches_find_single_hits<'r>(bvh: &WideBvh<8>, batches: impl Iterator<Item = &'r [Ray]>, what: &str) {
+        for rays in batches {
+            let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
+            let mut got = vec![None; rays.len()];
+            bvh.intersect_batch(rays, &mut got);
+            assert!(got == want, "{what}: hits differ from single rays");
+        }
+    }
+
+
     /// On a bench scene, a tile's diffuse rays share their nodes and random
     /// rays do not, or where the other way is interleaving do not try a
     /// stream (the ways the rule takes), and either way the batch finds the
@@ -480,15 +499,9 @@ mod tests {
         let probes: Vec<Option<bool>> = random.chunks(1024).map(|r| first_shared(&bvh, r, Unshared::Single(Scattered::TryStream))).collect();
         assert!(probes.contains(&Some(true)), "the random batches' first streams would not have streamed: {probes:?}");
         assert!(random.chunks(1024).all(|r| first_shared(&bvh, r, way).is_none()), "a random batch tries a stream");
-        let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
-        let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
+        let diffuse = tile_rays(&scene, &bvh);
         assert!(diffuse.chunks(1024).any(|d| first_shared(&bvh, d, way).is_some()), "no tile tries a stream");
-        for rays in diffuse.chunks(1024).chain(random.chunks(1024)) {
-            let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
-            let mut got = vec![None; rays.len()];
-            bvh.intersect_batch(rays, &mut got);
-            assert!(got == want, "hits differ from single rays");
-        }
+        assert_batches_find_single_hits(&bvh, diffuse.chunks(1024).chain(random.chunks(1024)), "arch:300k");
     }
 
 
@@ -505,18 +518,12 @@ mod tests {
             let scene = load_bench_scene(spec);
             let bvh = WideBvh::<8>::build(&scene.shapes);
             let ClosestBatches::StreamsWhereShared(way) = bvh.policy.closest else { panic!("{spec}: {:?}", bvh.policy.closest) };
-            let cam = camera_rays(&Camera::from_scene(&scene), 256, 192);
-            let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
+            let diffuse = tile_rays(&scene, &bvh);
             let random = crate::accel::workloads::random_rays(&scene, 4096, 2);
             assert!(diffuse.chunks(1024).all(|d| bvh.streams_untried(d, way) == small), "{spec}: tiles");
             assert!(random.chunks(1024).all(|r| !bvh.streams_untried(r, way)), "{spec}: random rays stream untried");
             assert!(!bvh.streams_untried(&diffuse[..STREAM_MIN_RAYS - 1], way), "{spec}: a small batch streams");
-            for rays in diffuse.chunks(1024) {
-                let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
-                let mut got = vec![None; rays.len()];
-                bvh.intersect_batch(rays, &mut got);
-                assert!(got == want, "{spec}: hits differ from single rays");
-            }
+            assert_batches_find_single_hits(&bvh, diffuse.chunks(1024), spec);
         }
     }
 
