@@ -2,7 +2,7 @@
 
 use super::Hit;
 use crate::geometry::{intersect_sphere, intersect_triangle, Aabb, RayTransform};
-use crate::scene::Shape;
+use crate::scene::{MeshFetch, Shape};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -103,23 +103,9 @@ impl<'a> PrimTable<'a> {
     /// with `vertices` (once the indices are near) its three vertices.
     #[inline]
     pub fn prefetch(&self, i: u32, vertices: bool) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let g = self.shape_of(i);
-            if let Shape::Mesh(m) = &self.shapes[g] {
-                let j = (i - self.starts[g]) as usize;
-                // SAFETY: prefetching reads nothing; the addresses are in bounds.
-                unsafe {
-                    if vertices {
-                        for k in m.triangles[j] {
-                            _mm_prefetch::<_MM_HINT_T0>(m.positions.as_ptr().add(k as usize) as *const i8);
-                        }
-                    } else {
-                        _mm_prefetch::<_MM_HINT_T0>(m.triangles.as_ptr().add(j) as *const i8);
-                    }
-                }
-            }
+        let g = self.shape_of(i);
+        if let Shape::Mesh(m) = &self.shapes[g] {
+            m.prefetch((i - self.starts[g]) as usize, if vertices { MeshFetch::Positions } else { MeshFetch::Indices });
         }
     }
 

@@ -1,7 +1,7 @@
 //! "Describe the hit": everything shading needs, computed from a backend's
 //! `Hit` by code shared by all backends.
 
-use super::{Scene, Shape};
+use super::{MeshFetch, Scene, Shape};
 use crate::ray::Hit;
 use crate::geometry::{intersect_triangle, RayTransform};
 use crate::sampling::{magnitude, spawn_origin, ulp};
@@ -96,17 +96,6 @@ impl Interaction {
     }
 }
 
-/// How far ahead of its description a hit's data is fetched: what
-/// `Interaction::with_barycentrics` reads from memory, in two steps because
-/// the second's addresses are read in the first.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum HitFetch {
-    /// The triangle's vertex indices.
-    Indices,
-    /// Its three positions and normals (once the indices are near).
-    Vertices,
-}
-
 /// Mesh data (vertex indices, positions, normals) above which a path's
 /// scattered hits are fetched ahead (`Scene::hits_miss_caches`). Measured
 /// (2 threads, 2-vCPU AMD EPYC, 32 spp): the subdivided CBbunny (1.8M
@@ -129,36 +118,16 @@ impl Scene {
         bytes >= FETCH_HITS_FROM_BYTES
     }
 
-    /// Start loading what describing `hit` will read, a step of `HitFetch`
-    /// at a time: on a mesh larger than the caches each step is a miss that
-    /// the path tracer otherwise waits for (a path's hits are scattered).
-    /// Changes nothing; a no-op off x86-64 and on spheres.
+    /// Start loading what describing `hit` will read, `step` of it
+    /// (`MeshFetch::Indices`, then `PositionsAndNormals`): on a mesh larger
+    /// than the caches each step is a miss that the path tracer otherwise
+    /// waits for (a path's hits are scattered). A hint, as
+    /// `TriangleMesh::prefetch`; nothing on spheres or unknown ids.
     #[inline]
-    pub fn prefetch_hit(&self, hit: &Hit, step: HitFetch) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let Some(Shape::Mesh(m)) = self.shapes.get(hit.geom_id as usize) else { return };
-            let Some(tri) = m.triangles.get(hit.prim_id as usize) else { return };
-            // SAFETY: prefetching reads nothing; every address is in bounds
-            // (the indices are checked before their vertices are named).
-            unsafe {
-                match step {
-                    HitFetch::Indices => _mm_prefetch::<_MM_HINT_T0>(tri.as_ptr() as *const i8),
-                    HitFetch::Vertices => {
-                        for &k in tri {
-                            let k = k as usize;
-                            if k < m.positions.len() && k < m.normals.len() {
-                                _mm_prefetch::<_MM_HINT_T0>(m.positions.as_ptr().add(k) as *const i8);
-                                _mm_prefetch::<_MM_HINT_T0>(m.normals.as_ptr().add(k) as *const i8);
-                            }
-                        }
-                    }
-                }
-            }
+    pub fn prefetch_hit(&self, hit: &Hit, step: MeshFetch) {
+        if let Some(Shape::Mesh(m)) = self.shapes.get(hit.geom_id as usize) {
+            m.prefetch(hit.prim_id as usize, step);
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = (hit, step);
     }
 }
 
@@ -243,7 +212,7 @@ mod tests {
         assert!(!scene.hits_miss_caches(), "the built-in Cornell box fits the caches");
         for (geom_id, prim_id) in [(mesh, 0), (mesh, u32::MAX), (sphere, 0), (u32::MAX, 0)] {
             let hit = Hit { t: 1.0, u: 0.25, v: 0.25, geom_id, prim_id };
-            for step in [HitFetch::Indices, HitFetch::Vertices] {
+            for step in [MeshFetch::Indices, MeshFetch::Positions, MeshFetch::PositionsAndNormals] {
                 scene.prefetch_hit(&hit, step);
             }
         }

@@ -17,7 +17,7 @@ use crate::accel::{Hit, Traversal};
 use crate::light::emitted;
 use crate::ray::Ray;
 use crate::sampler::Sampler;
-use crate::scene::interaction::HitFetch;
+use crate::scene::MeshFetch;
 use crate::scene::Interaction;
 use glam::Vec3;
 
@@ -155,7 +155,7 @@ impl<'a> PathTracer<'a> {
                 // memcpy).
                 let Some(v) = &p.v else { continue };
                 if let Some((k, _)) = p.next.filter(|_| fetch_hits) {
-                    for (ahead, step) in [(FETCH_INDICES_AHEAD, HitFetch::Indices), (FETCH_VERTICES_AHEAD, HitFetch::Vertices)] {
+                    for (ahead, step) in [(FETCH_INDICES_AHEAD, MeshFetch::Indices), (FETCH_VERTICES_AHEAD, MeshFetch::PositionsAndNormals)] {
                         if let Some(Some(h)) = found.get(k + ahead) {
                             self.scene.prefetch_hit(h, step);
                         }
