@@ -73,7 +73,7 @@ fn interleaving_reaches_incoherent_batches_on_middling_trees() {
         if b.policy.avx() {
             let way = match want {
                 // SAFETY: `avx()` says the CPU has AVX2.
-                InterleaveReach::None => policy::ClosestBatches::StreamsWhereShared(policy::Unshared::Single(unsafe { b.scattered_batches() })),
+                InterleaveReach::None => policy::ClosestBatches::StreamsWhereShared(policy::Unshared::Single(unsafe { b.scattered_batches() }, b.gathered_batches())),
                 InterleaveReach::Incoherent => policy::ClosestBatches::StreamsElseInterleaved,
                 InterleaveReach::All => policy::ClosestBatches::StreamsWhereShared(policy::Unshared::Interleaved),
             };

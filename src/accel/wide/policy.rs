@@ -69,8 +69,9 @@ pub(super) enum ClosestBatches {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Unshared {
     /// One ray at a time: the tree stays in the caches. A batch whose rays
-    /// start far apart tries a first stream only as `Scattered` says.
-    Single(Scattered),
+    /// start far apart tries a first stream only as `Scattered` says; one
+    /// whose rays do not, as `Gathered` says.
+    Single(Scattered, Gathered),
     /// Interleaved: the tree is too large for the caches
     /// (`InterleaveReach::All`).
     Interleaved,
@@ -88,6 +89,20 @@ pub(super) enum Scattered {
     /// It goes one ray at a time: such streams fell well short, and the
     /// first stream would be refused after costing its rays twice over.
     Single,
+}
+
+/// Whether a closest-hit batch whose rays do not start far apart (a
+/// tile's bounce rays) streams without trying a first stream, on a tree
+/// that stays in the caches; chosen when the tree is built
+/// (`WideBvh::gathered_batches`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Gathered {
+    /// It streams untried: the tree is small, and such streams almost
+    /// always shared there.
+    Streams,
+    /// It tries a first stream: the tree is large, and a third of a tile's
+    /// streams shared too little to pay.
+    TryStream,
 }
 
 /// How coherent occlusion batches (`occluded_coherent`) go.
@@ -178,7 +193,7 @@ impl Policy {
             BatchWay::Auto if interleave => ClosestBatches::StreamsWhereShared(Unshared::Interleaved),
             BatchWay::Auto if reach == InterleaveReach::Incoherent => ClosestBatches::StreamsElseInterleaved,
             // SAFETY: `streams` implies AVX2.
-            BatchWay::Auto if streams => ClosestBatches::StreamsWhereShared(Unshared::Single(unsafe { tree.scattered_batches() })),
+            BatchWay::Auto if streams => ClosestBatches::StreamsWhereShared(Unshared::Single(unsafe { tree.scattered_batches() }, tree.gathered_batches())),
             BatchWay::Streams if streams => ClosestBatches::Streams,
             BatchWay::Interleaved if avx => ClosestBatches::Interleaved,
             _ => ClosestBatches::Single,
@@ -227,8 +242,10 @@ impl Policy {
             ClosestBatches::Single => "closest hits one by one",
             ClosestBatches::Interleaved => "closest hits interleaved",
             ClosestBatches::Streams => "closest-hit streams",
-            ClosestBatches::StreamsWhereShared(Unshared::Single(Scattered::TryStream)) => "closest-hit streams where shared",
-            ClosestBatches::StreamsWhereShared(Unshared::Single(Scattered::Single)) => "closest-hit streams where shared, scattered batches one by one",
+            ClosestBatches::StreamsWhereShared(Unshared::Single(Scattered::TryStream, Gathered::Streams)) => "closest-hit streams, scattered batches where shared",
+            ClosestBatches::StreamsWhereShared(Unshared::Single(Scattered::Single, Gathered::Streams)) => "closest-hit streams, scattered batches one by one",
+            ClosestBatches::StreamsWhereShared(Unshared::Single(Scattered::TryStream, Gathered::TryStream)) => "closest-hit streams where shared",
+            ClosestBatches::StreamsWhereShared(Unshared::Single(Scattered::Single, Gathered::TryStream)) => "closest-hit streams where shared, scattered batches one by one",
             ClosestBatches::StreamsWhereShared(Unshared::Interleaved) => "closest-hit streams where shared, else interleaved",
             ClosestBatches::StreamsElseInterleaved => "closest-hit streams where coherent, else interleaved",
         };

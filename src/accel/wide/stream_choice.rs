@@ -5,7 +5,7 @@
 //!
 //! * on trees that stay in the caches and are smaller than 16 MiB, a batch
 //!   whose rays do not start far apart streams without a trial
-//!   (`streams_untried`);
+//!   (`Gathered::Streams`);
 //! * a batch traces its first full stream (64 rays of one octant) and goes
 //!   on in streams where those rays shared the nodes they fetched
 //!   (`closest_streams_where_shared`), else one ray at a time, or
@@ -24,7 +24,7 @@
 //! No way changes an answer (each gives the single-ray walk's hits).
 
 use super::hit_stream::StreamWork;
-use super::policy::{Scattered, Unshared};
+use super::policy::{Gathered, Scattered, Unshared};
 use super::stream::{octant_streams_until, FirstStream, STREAM};
 use super::{WideBvh, EMPTY, LEAF_BIT};
 use crate::accel::Hit;
@@ -100,13 +100,25 @@ const SCATTERED_MAY_SHARE: (u64, u64) = (27, 8);
 /// unchanged.
 const SCATTERED_ALONE_BYTES: usize = super::interleave::INTERLEAVE_BYTES;
 
+/// How a closest-hit batch starts (`WideBvh::batch_start`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum BatchStart {
+    /// All of it in streams, untried.
+    Streams,
+    /// Its first full stream (the rays, their octant) is traced, and
+    /// decides how the rest go.
+    TryFirst([u32; STREAM], usize),
+    /// No stream: the whole batch goes the way `Unshared` says.
+    Unshared,
+}
+
 impl StreamWork {
     /// Whether the stream's rays shared its nodes enough to go on in
     /// streams rather than the way `otherwise` says (`SHARED`,
     /// `SHARED_OVER_INTERLEAVED`).
     pub(super) fn shared(&self, otherwise: Unshared) -> bool {
         self.tests_per_fetch_at_least(match otherwise {
-            Unshared::Single(_) => SHARED,
+            Unshared::Single(..) => SHARED,
             Unshared::Interleaved => SHARED_OVER_INTERLEAVED,
         })
     }
@@ -202,21 +214,21 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    /// `hits[i]` = the closest hit of `rays[i]`: the batch's first full
-    /// stream is traced as a stream, and the rest go in streams too where
-    /// that stream's rays shared its nodes (`StreamWork::shared`), else as
-    /// `otherwise` says. The way depends on the batch alone.
+    /// `hits[i]` = the closest hit of `rays[i]`: as `batch_start` says, all
+    /// in streams, or the batch's first full stream is traced as a stream
+    /// and the rest go in streams too where that stream's rays shared its
+    /// nodes (`StreamWork::shared`), else as `otherwise` says. The way
+    /// depends on the batch alone.
     ///
     /// # Safety
     /// As `closest_streams`.
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest_streams_where_shared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared) {
         debug_assert!(W == 8);
-        if self.streams_untried(rays, otherwise) {
-            return self.closest_streams(rays, hits);
-        }
-        let Some((which, oct)) = self.first_stream_to_try(rays, otherwise) else {
-            return self.closest_unshared(rays, hits, otherwise, None);
+        let (which, oct) = match self.batch_start(rays, otherwise) {
+            BatchStart::Streams => return self.closest_streams(rays, hits),
+            BatchStart::Unshared => return self.closest_unshared(rays, hits, otherwise, None),
+            BatchStart::TryFirst(which, oct) => (which, oct),
         };
         hits.fill(None);
         let mut work = StreamWork::default();
@@ -234,52 +246,53 @@ impl<const W: usize> WideBvh<W> {
         }
     }
 
-    /// Whether `rays` go in streams without a first stream to try them: on
-    /// a tree that stays in the caches (`Unshared::Single`) and is smaller
-    /// than `SCATTERED_ALONE_BYTES`, a batch of `STREAM_MIN_RAYS` or more
-    /// whose rays do not start far apart (a tile's bounce rays). Its first
-    /// stream almost always shared, and where it did not, streams still
-    /// beat one ray at a time: the bench's diffuse batches, native ÷
-    /// Embree 4, 1 thread (2-vCPU AMD EPYC, Zen 3, two runs), tried /
-    /// untried: CBbunny 1.18 / 1.25-1.26, cow 1.48-1.50 / 1.56, beetle
-    /// 1.46 / 1.53; CBbunny's path-traced render 1.3 % faster. Not on the
-    /// large trees: the architecture scene's tiles that share little (a
-    /// third) are faster one ray at a time (0.90-0.94 tried, 0.88-0.89
-    /// untried; the stadium 1.37 / 1.42). Scattered
-    /// batches still try theirs, or go one ray at a time (`Scattered`):
-    /// streamed untried, cow's random batches read 0.88 against 1.05.
-    pub(super) fn streams_untried(&self, rays: &[Ray], otherwise: Unshared) -> bool {
+    /// Whether batches whose rays do not start far apart stream untried on
+    /// this tree (`Gathered`): on trees smaller than
+    /// `SCATTERED_ALONE_BYTES`, whose rays stay in the caches. There a
+    /// tile's first stream almost always shared, and where it did not,
+    /// streams still beat one ray at a time: the bench's diffuse batches,
+    /// native ÷ Embree 4, 1 thread (2-vCPU AMD EPYC, Zen 3, two runs),
+    /// tried / untried: CBbunny 1.18 / 1.25-1.26, cow 1.48-1.50 / 1.56,
+    /// beetle 1.46 / 1.53; CBbunny's path-traced render 1.3 % faster. Not
+    /// on the large trees: the architecture scene's tiles that share
+    /// little (a third) are faster one ray at a time (0.90-0.94 tried,
+    /// 0.88-0.89 untried; the stadium 1.37 / 1.42). Scattered batches
+    /// still try theirs, or go one ray at a time (`Scattered`): streamed
+    /// untried, cow's random batches read 0.88 against 1.05.
+    pub(super) fn gathered_batches(&self) -> Gathered {
         use super::Traversal;
-        matches!(otherwise, Unshared::Single(_))
-            && self.memory_bytes() < SCATTERED_ALONE_BYTES
-            && rays.len() >= STREAM_MIN_RAYS
-            && self.tree.root & LEAF_BIT == 0
-            && self.tree.root != EMPTY
-            && !self.origins_scattered(rays)
+        if self.memory_bytes() < SCATTERED_ALONE_BYTES {
+            Gathered::Streams
+        } else {
+            Gathered::TryStream
+        }
     }
 
-    /// The first full stream of `rays` and its octant, where
-    /// `closest_streams_where_shared` tries one. On trees too large for
-    /// the caches the first stream itself costs (its fetches miss, one
-    /// after another, where interleaved rays overlap theirs), so it is
-    /// tried there only where the batch's rays start close together and
-    /// could share (`streams_pay`); elsewhere not where they start far
-    /// apart and the tree's rays from anywhere were seen not to share
-    /// (`Scattered::Single`).
-    pub(super) fn first_stream_to_try(&self, rays: &[Ray], otherwise: Unshared) -> Option<([u32; STREAM], usize)> {
-        // The constant-time checks first; the origin rule is a pass over the batch.
+    /// How `closest_streams_where_shared` starts a batch. On trees too
+    /// large for the caches the first stream itself costs (its fetches
+    /// miss, one after another, where interleaved rays overlap theirs), so
+    /// it is tried there only where the batch's rays start close together
+    /// and could share (`streams_pay`). On trees that stay in the caches
+    /// the batch's origins decide once (`origins_scattered`): rays that
+    /// start far apart try a first stream as `Scattered` says, the others
+    /// as `Gathered` says.
+    pub(super) fn batch_start(&self, rays: &[Ray], otherwise: Unshared) -> BatchStart {
+        // The constant-time checks first; the origin rules are passes over the batch.
         if rays.len() < STREAM_MIN_RAYS || self.tree.root & LEAF_BIT != 0 || self.tree.root == EMPTY {
-            return None;
+            return BatchStart::Unshared;
         }
-        let refused = match otherwise {
-            Unshared::Interleaved => !self.streams_pay(rays),
-            Unshared::Single(Scattered::Single) => self.origins_scattered(rays),
-            Unshared::Single(Scattered::TryStream) => false,
+        let try_first = match otherwise {
+            Unshared::Interleaved => self.streams_pay(rays),
+            Unshared::Single(scattered, gathered) => match (self.origins_scattered(rays), scattered, gathered) {
+                (true, Scattered::TryStream, _) | (false, _, Gathered::TryStream) => true,
+                (true, Scattered::Single, _) => false,
+                (false, _, Gathered::Streams) => return BatchStart::Streams,
+            },
         };
-        if refused {
-            return None;
+        match try_first.then(|| first_full_stream(rays)).flatten() {
+            Some((which, oct)) => BatchStart::TryFirst(which, oct),
+            None => BatchStart::Unshared,
         }
-        first_full_stream(rays)
     }
 
     /// The rays of a batch but those its first stream traced, the way
@@ -290,7 +303,7 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     unsafe fn closest_unshared(&self, rays: &[Ray], hits: &mut [Option<Hit>], otherwise: Unshared, first: Option<FirstStream>) {
         match otherwise {
-            Unshared::Single(_) => self.closest_batch_except(rays, hits, first),
+            Unshared::Single(..) => self.closest_batch_except(rays, hits, first),
             Unshared::Interleaved => self.closest_interleaved_except(rays, hits, first),
         }
     }
@@ -329,7 +342,7 @@ mod tests {
         // Batches of 777 take both ways (the test rays come in runs of
         // coherent and random rays; where the other way is interleaving,
         // random runs try no stream).
-        for (otherwise, unshared) in [(Unshared::Single(Scattered::TryStream), Some(false)), (Unshared::Single(Scattered::Single), None), (Unshared::Interleaved, None)] {
+        for (otherwise, unshared) in [(Unshared::Single(Scattered::TryStream, Gathered::TryStream), Some(false)), (Unshared::Single(Scattered::Single, Gathered::TryStream), None), (Unshared::Interleaved, None)] {
             let ways: Vec<Option<bool>> = rays.chunks(777).map(|r| first_shared(&bvh, r, otherwise)).collect();
             assert!(ways.contains(&Some(true)) && ways.contains(&unshared), "{otherwise:?}: batches of 777 take one way only: {ways:?}");
         }
@@ -338,6 +351,7 @@ mod tests {
             ("streams", streams as Way),
             ("streams where shared, else single", where_shared as Way),
             ("streams where shared, else and where scattered single", where_shared_unless_scattered as Way),
+            ("streams untried where gathered, else where shared", gathered_untried as Way),
             ("streams where shared, else interleaved", where_shared_else_interleaved as Way),
         ];
         for (name, way) in ways {
@@ -357,7 +371,7 @@ mod tests {
     /// batches one ray at a time.
     fn where_shared(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
         // SAFETY: the tests call this only after `avx_or_skip`.
-        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::TryStream)) }
+        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::TryStream, Gathered::TryStream)) }
     }
 
 
@@ -365,7 +379,15 @@ mod tests {
     /// time without a first stream.
     fn where_shared_unless_scattered(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
         // SAFETY: as above.
-        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::Single)) }
+        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::Single, Gathered::TryStream)) }
+    }
+
+
+    /// `where_shared`, batches whose rays start close together all in
+    /// streams without a first stream.
+    fn gathered_untried(bvh: &WideBvh<8>, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        // SAFETY: as above.
+        unsafe { bvh.closest_streams_where_shared(rays, hits, Unshared::Single(Scattered::TryStream, Gathered::Streams)) }
     }
 
 
@@ -380,7 +402,7 @@ mod tests {
     /// stream rather than go the way `otherwise` says (`None`: the batch
     /// tries no stream).
     fn first_shared(bvh: &WideBvh<8>, rays: &[Ray], otherwise: Unshared) -> Option<bool> {
-        let (which, oct) = bvh.first_stream_to_try(rays, otherwise)?;
+        let BatchStart::TryFirst(which, oct) = bvh.batch_start(rays, otherwise) else { return None };
         let mut hits = vec![None; rays.len()];
         let mut work = StreamWork::default();
         // SAFETY: as above.
@@ -423,7 +445,7 @@ mod tests {
         let diffuse = diffuse_rays(&scene, &bvh, &tile_order(&cam, 256, 192, 32), 3);
         let random = crate::accel::workloads::random_rays(&scene, 8192, 2);
         let (d, r) = (&diffuse[..1024], &random[..1024]);
-        let (try_stream, single) = (Unshared::Single(Scattered::TryStream), Unshared::Single(Scattered::Single));
+        let (try_stream, single) = (Unshared::Single(Scattered::TryStream, Gathered::TryStream), Unshared::Single(Scattered::Single, Gathered::TryStream));
         for otherwise in [try_stream, single, Unshared::Interleaved] {
             assert_eq!(first_shared(&bvh, d, otherwise), Some(true), "{otherwise:?}: a tile's diffuse rays do not share their nodes");
         }
@@ -433,7 +455,7 @@ mod tests {
         assert_eq!(first_shared(&bvh, r, Unshared::Interleaved), None, "random rays try a stream where the other way is interleaving");
         for rays in [d, r] {
             let want: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
-            for way in [where_shared, where_shared_unless_scattered, where_shared_else_interleaved] {
+            for way in [where_shared, where_shared_unless_scattered, gathered_untried, where_shared_else_interleaved] {
                 let mut got = vec![None; rays.len()];
                 way(&bvh, rays, &mut got);
                 assert!(got == want, "hits differ from single rays");
@@ -459,10 +481,10 @@ mod tests {
             let bvh = WideBvh::<8>::build(&scene.shapes);
             // SAFETY: after `avx_or_skip`.
             let chosen = unsafe { bvh.scattered_batches() };
-            assert_eq!(bvh.policy.closest, ClosestBatches::StreamsWhereShared(Unshared::Single(chosen)), "{name}");
+            assert_eq!(bvh.policy.closest, ClosestBatches::StreamsWhereShared(Unshared::Single(chosen, bvh.gathered_batches())), "{name}");
             assert_eq!(unsafe { WideBvh::<8>::build(&scene.shapes).scattered_batches() }, chosen, "{name}: built again");
             let random = crate::accel::workloads::random_rays(&scene, 4 * 4096, 9);
-            let probes: Vec<Option<bool>> = random.chunks(4096).map(|r| first_shared(&bvh, r, Unshared::Single(Scattered::TryStream))).collect();
+            let probes: Vec<Option<bool>> = random.chunks(4096).map(|r| first_shared(&bvh, r, Unshared::Single(Scattered::TryStream, Gathered::TryStream))).collect();
             // Where they try, the first stream still decides batch by batch.
             let agrees = match chosen {
                 Scattered::TryStream => probes.contains(&Some(true)),
@@ -493,10 +515,10 @@ mod tests {
         assert_eq!(bvh.interleave_reach(), super::super::interleave::InterleaveReach::None, "the test needs a tree whose rays stay cached");
         // SAFETY: after `avx_or_skip`.
         assert_eq!(unsafe { bvh.scattered_batches() }, Scattered::Single);
-        let way = Unshared::Single(Scattered::Single);
+        let way = Unshared::Single(Scattered::Single, Gathered::TryStream);
         assert_eq!(bvh.policy.closest, ClosestBatches::StreamsWhereShared(way));
         let random = crate::accel::workloads::random_rays(&scene, 4096, 2);
-        let probes: Vec<Option<bool>> = random.chunks(1024).map(|r| first_shared(&bvh, r, Unshared::Single(Scattered::TryStream))).collect();
+        let probes: Vec<Option<bool>> = random.chunks(1024).map(|r| first_shared(&bvh, r, Unshared::Single(Scattered::TryStream, Gathered::TryStream))).collect();
         assert!(probes.contains(&Some(true)), "the random batches' first streams would not have streamed: {probes:?}");
         assert!(random.chunks(1024).all(|r| first_shared(&bvh, r, way).is_none()), "a random batch tries a stream");
         let diffuse = tile_rays(&scene, &bvh);
@@ -520,9 +542,11 @@ mod tests {
             let ClosestBatches::StreamsWhereShared(way) = bvh.policy.closest else { panic!("{spec}: {:?}", bvh.policy.closest) };
             let diffuse = tile_rays(&scene, &bvh);
             let random = crate::accel::workloads::random_rays(&scene, 4096, 2);
-            assert!(diffuse.chunks(1024).all(|d| bvh.streams_untried(d, way) == small), "{spec}: tiles");
-            assert!(random.chunks(1024).all(|r| !bvh.streams_untried(r, way)), "{spec}: random rays stream untried");
-            assert!(!bvh.streams_untried(&diffuse[..STREAM_MIN_RAYS - 1], way), "{spec}: a small batch streams");
+            let untried = |rays: &[Ray]| bvh.batch_start(rays, way) == BatchStart::Streams;
+            assert_eq!(bvh.gathered_batches() == Gathered::Streams, small, "{spec}");
+            assert!(diffuse.chunks(1024).all(|d| untried(d) == small), "{spec}: tiles");
+            assert!(random.chunks(1024).all(|r| !untried(r)), "{spec}: random rays stream untried");
+            assert!(!untried(&diffuse[..STREAM_MIN_RAYS - 1]), "{spec}: a small batch streams");
             assert_batches_find_single_hits(&bvh, diffuse.chunks(1024), spec);
         }
     }
