@@ -283,13 +283,14 @@ impl<const W: usize> WideBvh<W> {
         }
         let try_first = match otherwise {
             Unshared::Interleaved => self.streams_pay(rays),
-            Unshared::Single(scattered, gathered) => match (self.origins_scattered(rays), scattered, gathered) {
-                (true, Scattered::TryStream, _) | (false, _, Gathered::TryStream) => true,
-                (true, Scattered::Single, _) => false,
-                (false, _, Gathered::Streams) => return BatchStart::Streams,
-            },
+            Unshared::Single(scattered, _) if self.origins_scattered(rays) => scattered == Scattered::TryStream,
+            Unshared::Single(_, Gathered::Streams) => return BatchStart::Streams,
+            Unshared::Single(_, Gathered::TryStream) => true,
         };
-        match try_first.then(|| first_full_stream(rays)).flatten() {
+        if !try_first {
+            return BatchStart::Unshared;
+        }
+        match first_full_stream(rays) {
             Some((which, oct)) => BatchStart::TryFirst(which, oct),
             None => BatchStart::Unshared,
         }
