@@ -355,9 +355,18 @@ fn bench_writes_csv_and_markdown_tables() {
                 assert!(ratio > 0.5 && ratio < 2.0, "{sah}");
             }
         }
-        // Each Embree's batch calls were timed.
+        // Each Embree's batch calls were timed, and native against the
+        // fastest per ray kind, each cell naming the call.
         for e in &embrees {
             assert!(md.contains(&format!("| cow | {e} | camera |")), "no batch-call row for {e}: {md}");
+            let row = md.lines().find(|l| l.starts_with(&format!("| cow | {e} | ")) && l.contains(" i) |")).unwrap_or_else(|| panic!("no native ÷ fastest call row for {e}: {md}"));
+            let cells: Vec<&str> = row.split(" | ").skip(2).collect();
+            assert_eq!(cells.len(), 4, "{row}");
+            for cell in cells {
+                let (ratio, call) = cell.split_once(" (").unwrap_or_else(|| panic!("{row}"));
+                assert!(ratio.parse::<f64>().is_ok_and(|r| r > 0.0 && r.is_finite()), "{row}");
+                assert!(["loop", "stream", "packet4", "packet8", "packet16"].iter().any(|c| call.starts_with(c)), "{row}");
+            }
         }
     } else {
         eprintln!("note: Embree is not built in; the bench's Embree columns were not checked");

@@ -7,8 +7,6 @@
 use crate::accel::{self, BackendKind};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-#[cfg(has_embree)]
-use crate::ray::Ray;
 use crate::light::Lights;
 use crate::render::{self, path::{specular_guide::{self, SpecularGuide}, PathTracer}, RenderSettings};
 use crate::scene::Scene;
@@ -17,6 +15,8 @@ use glam::Vec3;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+#[cfg(has_embree)]
+mod embree_calls;
 mod resume;
 mod run;
 mod tables;
@@ -25,8 +25,6 @@ mod timing;
 use crate::scene::generated;
 pub use timing::PASSES;
 pub use run::run;
-#[cfg(has_embree)]
-use timing::{throughput, RayKind};
 
 pub use tables::Sample;
 
@@ -251,54 +249,6 @@ fn peers() -> Vec<Contender> {
 }
 
 
-/// Each Embree's batch calls compared on one thread (which ones the backend
-/// uses for coherent and incoherent batches were chosen from these numbers,
-/// `embree::Major::default_batch_modes`), and the best of them per ray kind
-/// pushed to `best`, so that native is compared with each Embree at its best
-/// and not only with the calls the backend uses. Every call of the major
-/// (a loop of single rays; Embree 3's streams; packets of 4, 8 and 16) is
-/// timed with the coherent flag for camera and shadow rays and with the
-/// incoherent flag for every ray kind: on the large meshes Embree 3's
-/// incoherent stream is its fastest shadow call (1 thread, Mrays/s, coherent
-/// / incoherent stream: sphere:1M 6.39 / 8.95, grass:500k 0.60 / 1.21,
-/// subdiv:bunny:500k 4.72 / 7.58; cow 26.0 / 16.1).
-#[cfg(has_embree)]
-fn embree_modes(
-    major: crate::accel::embree::Major,
-    scene: &Scene,
-    cam: &[Ray],
-    rnd: &[Ray],
-    shadow: &[Ray],
-    diffuse: &[Ray],
-    rows: &mut String,
-    best: &mut Vec<(String, &'static str, Contender, f64)>,
-) -> Result<()> {
-    use crate::accel::embree::{BatchMode, EmbreeBackend, Quality};
-    let mut e = EmbreeBackend::build(major, &scene.shapes, 1, Quality::Medium)?;
-    let contender = Contender::Backend(if major == crate::accel::embree::Major::V3 { BackendKind::Embree3 } else { BackendKind::Embree4 });
-    for (label, rays, coherent, incoherent) in [
-        ("camera", cam, Some(RayKind::Camera), RayKind::Random),
-        ("shadow", shadow, Some(RayKind::Shadow), RayKind::ShadowIncoherent),
-        ("random", rnd, None, RayKind::Random),
-        ("diffuse", diffuse, None, RayKind::Random),
-    ] {
-        let mut cells = Vec::new();
-        let mut top = 0.0f64;
-        for &mode in BatchMode::all(major) {
-            e.set_batch_modes(mode, mode);
-            for kind in [coherent, Some(incoherent)] {
-                let m = kind.map(|k| throughput(&e, rays, k, 1, 3));
-                if let Some(m) = m {
-                    top = top.max(m);
-                }
-                cells.push(m.map_or("–".to_string(), |m| format!("{m:.2}")));
-            }
-        }
-        best.push((scene.name.clone(), label, contender, top));
-        let _ = writeln!(rows, "| {} | embree{} | {label} | {} |", scene.name, major.number(), cells.join(" | "));
-    }
-    Ok(())
-}
 
 /// Time full renders of one scene per backend, with and without camera-ray
 /// batches, and check that every render made the same image.

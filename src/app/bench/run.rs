@@ -1,7 +1,7 @@
 //! One `pathtracer bench` run: the plan (contenders, thread counts), each
 //! scene timed in turn into the run's tables, then the report.
 
-use super::tables::{best_call_table, ratio_table, scaling_table, Sample};
+use super::tables::{best_call_table, ratio_table, scaling_table, BestCall, Sample};
 use super::timing::{labels, throughput, throughputs, RaySet, TIMED};
 use super::resume::{exact, parse_exact, Checkpoints};
 use super::{cpu_model, embree_sah, load_bench_scene, path_render_rows, peers, seed_timing, thread_counts, BenchArgs, Contender};
@@ -94,7 +94,7 @@ struct Tables {
     sah: String,
     /// Each Embree's batch calls, and its fastest call per ray kind.
     modes: String,
-    embree_best: Vec<(String, &'static str, Contender, f64)>,
+    embree_best: Vec<BestCall>,
     /// Normal shading with and without the BVH.
     normals: String,
     /// The path-traced renders' rows.
@@ -119,7 +119,11 @@ impl Tables {
             "samples": self.samples.iter().map(|s| json!([s.scene, s.rays, s.threads, s.backend.to_string(), exact(s.mrays_per_s)])).collect::<Vec<_>>(),
             "sah": self.sah,
             "modes": self.modes,
-            "embree_best": self.embree_best.iter().map(|(scene, rays, c, m)| json!([scene, rays, c.to_string(), exact(*m)])).collect::<Vec<_>>(),
+            "embree_best": self
+                .embree_best
+                .iter()
+                .map(|b| json!([b.scene, b.rays, b.embree.to_string(), b.call, b.paired.map(|(n, e)| [exact(n), exact(e)])]))
+                .collect::<Vec<_>>(),
             "normals": self.normals,
             "renders": self.renders,
         })
@@ -138,7 +142,11 @@ impl Tables {
         }
         let mut embree_best = Vec::new();
         for b in v["embree_best"].as_array()? {
-            embree_best.push((b[0].as_str()?.to_string(), rays(&b[1])?, contender(&b[2])?, parse_exact(&b[3])?));
+            let paired = match &b[4] {
+                Value::Null => None,
+                p => Some((parse_exact(&p[0])?, parse_exact(&p[1])?)),
+            };
+            embree_best.push(BestCall { scene: b[0].as_str()?.to_string(), rays: rays(&b[1])?, embree: contender(&b[2])?, call: b[3].as_str()?.to_string(), paired });
         }
         Some(Tables {
             throughput: text("throughput")?,
@@ -275,13 +283,16 @@ fn bench_scene(args: &BenchArgs, plan: &Plan, name: &str, t: &mut Tables) -> Res
     let rays = RaySets::new(&scene, first.accel.as_ref(), &camera_all, w, h, args.rays);
     let cells = time_kinds(args, plan, &scene, &built, &rays, &mut t.samples);
     throughput_rows(args, plan, name, &scene, &built, &build_times, &cells, t);
-    drop(built);
+    // Native's tree stays for the Embree batch calls to be timed against.
+    let native = built.into_iter().find(|(k, _)| *k == Contender::Backend(BackendKind::Native)).map(|(_, b)| b);
     #[cfg(has_embree)]
     if !args.throughput_only {
+        let call_rays = super::embree_calls::CallRays { camera: &rays.camera, shadow: &rays.shadow, random: &rays.random, diffuse: &rays.diffuse };
         for &major in &plan.majors {
-            super::embree_modes(major, &scene, &rays.camera, &rays.random, &rays.shadow, &rays.diffuse, &mut t.modes, &mut t.embree_best)?;
+            super::embree_calls::embree_calls(major, &scene, native.as_ref().map(|b| b.accel.as_ref()), &call_rays, args.passes, &mut t.modes, &mut t.embree_best)?;
         }
     }
+    drop(native);
     if !(args.no_render || args.throughput_only) && !scene.source.starts_with("<generated") {
         t.normals.push_str(&normal_shading_row(&scene, &camera, plan.all)?);
     }
@@ -470,7 +481,39 @@ fn modes_table(t: &Tables) -> String {
             let _ = writeln!(md, "{line}");
         }
     }
-    let _ = writeln!(md, "\nnative ÷ each Embree's fastest batch call above (the best of its columns), 1 thread, from this run:\n");
-    md.push_str(&best_call_table(&t.samples, &t.embree_best));
+    let _ = writeln!(
+        md,
+        "\nnative's batch call ÷ each Embree's fastest batch call above (the best of its columns, named in each cell), 1 thread: \
+         the two timed again, their passes alternating as in the throughput table:\n"
+    );
+    md.push_str(&best_call_table(&t.embree_best));
     md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A part kept by `--resume` reads back as it was measured, the Embree
+    /// calls' paired speeds included.
+    #[test]
+    fn kept_parts_read_back_exactly() {
+        let e4 = Contender::Backend(BackendKind::Embree4);
+        let native = Contender::Backend(BackendKind::Native);
+        let plan = Plan { all: 2, backends: vec![BackendKind::Native, BackendKind::Embree4], contenders: vec![native, e4], thread_counts: vec![1], majors: vec![], expected_rays: 0 };
+        let t = Tables {
+            throughput: "| rows |\n".into(),
+            samples: vec![Sample { scene: "cow".into(), rays: "diffuse", threads: 1, backend: native, mrays_per_s: 0.1 + 0.2 }],
+            modes: "| cow | embree4 | diffuse |\n".into(),
+            embree_best: vec![
+                BestCall { scene: "cow".into(), rays: "diffuse", embree: e4, call: "packet4 i".into(), paired: Some((1.0 / 3.0, 7.25)) },
+                BestCall { scene: "cow".into(), rays: "camera", embree: e4, call: "loop c".into(), paired: None },
+            ],
+            ..Tables::default()
+        };
+        let back = Tables::from_json(&t.to_json(), &plan).expect("reads back");
+        assert_eq!(back.embree_best, t.embree_best);
+        assert_eq!(back.samples[0].mrays_per_s.to_bits(), (0.1f64 + 0.2).to_bits());
+        assert_eq!((back.throughput, back.modes), (t.throughput, t.modes));
+    }
 }

@@ -24,29 +24,41 @@ fn mrays(samples: &[Sample], scene: &str, rays: &str, threads: usize, backend: C
 /// The batch kinds compared with each Embree's fastest call.
 pub(super) const BEST_CALL_KINDS: [&str; 4] = ["camera", "shadow", "random", "diffuse"];
 
-/// native's 1-thread Mrays/s ÷ `best` (per scene, Embree and ray kind: its
-/// fastest batch call, `embree_modes`), as a table.
-pub(super) fn best_call_table(samples: &[Sample], best: &[(String, &'static str, Contender, f64)]) -> String {
+/// One Embree's fastest batch call for one scene's rays of one kind
+/// (`embree_calls`), and native's batch call timed against it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BestCall {
+    pub scene: String,
+    pub rays: &'static str,
+    pub embree: Contender,
+    /// The call as the batch-call table's columns name it: "packet4 i".
+    pub call: String,
+    /// Mrays/s of native's batch call and of that call, their passes
+    /// alternating on one thread; `None` where native was not benched.
+    pub paired: Option<(f64, f64)>,
+}
+
+/// native ÷ each Embree's fastest batch call per scene and ray kind, each
+/// cell naming the call, as a table.
+pub(super) fn best_call_table(best: &[BestCall]) -> String {
     let mut out = String::from("| scene | ÷ |");
     for rays in BEST_CALL_KINDS {
         let _ = write!(out, " {rays} 1T |");
     }
     let _ = writeln!(out, "\n|---|---|{}", "---:|".repeat(BEST_CALL_KINDS.len()));
     let contenders: Vec<Contender> = best.iter().fold(Vec::new(), |mut v, b| {
-        if !v.contains(&b.2) {
-            v.push(b.2);
+        if !v.contains(&b.embree) {
+            v.push(b.embree);
         }
         v
     });
-    for sc in in_order(best.iter().map(|b| b.0.as_str())) {
+    for sc in in_order(best.iter().map(|b| b.scene.as_str())) {
         for &c in &contenders {
             let mut row = format!("| {sc} | {c} |");
             for rays in BEST_CALL_KINDS {
-                let native = mrays(samples, sc, rays, 1, Contender::Backend(BackendKind::Native));
-                let e = best.iter().find(|b| b.0 == sc && b.1 == rays && b.2 == c).map(|b| b.3);
-                match (native, e) {
-                    (Some(n), Some(e)) if e > 0.0 => {
-                        let _ = write!(row, " {:.2} |", n / e);
+                match best.iter().find(|b| b.scene == sc && b.rays == rays && b.embree == c) {
+                    Some(BestCall { call, paired: Some((n, e)), .. }) if *e > 0.0 => {
+                        let _ = write!(row, " {:.2} ({call}) |", n / e);
                     }
                     _ => row.push_str(" – |"),
                 }
@@ -183,6 +195,16 @@ mod tests {
         assert!(table.contains("shadow 8T"), "{table}");
         let row = table.lines().find(|l| l.starts_with("| arch |")).unwrap();
         assert_eq!(row, "| arch | – | – | 0.50 | 0.50 | – | – | – | – | – | – | – | – |");
+    }
+
+    #[test]
+    fn best_call_cells_divide_the_paired_speeds_and_name_the_call() {
+        let e4 = Contender::Backend(BackendKind::Embree4);
+        let call = |rays, call: &str, paired| BestCall { scene: "arch".into(), rays, embree: e4, call: call.into(), paired };
+        let best = [call("shadow", "packet8 c", Some((30.0, 20.0))), call("diffuse", "packet4 i", Some((9.0, 10.0))), call("random", "loop i", None)];
+        let table = best_call_table(&best);
+        let row = table.lines().find(|l| l.starts_with("| arch |")).expect("arch row");
+        assert_eq!(row, "| arch | embree4 | – | 1.50 (packet8 c) | – | 0.90 (packet4 i) |");
     }
 }
 

@@ -59,7 +59,7 @@ pub(super) enum RaySet {
 /// timed passes (cow camera rays, 1 thread: 39-54 Mrays/s in four of seven
 /// runs, 65-66 in the others), as if the CPU were still clocking up.
 pub(super) fn throughput(accel: &dyn Traversal, rays: &[Ray], kind: RayKind, threads: usize, reps: usize) -> f64 {
-    timed_passes(&[accel], rays, kind, threads, reps, reps > 1)[0]
+    timed_passes(&[(accel, kind)], rays, threads, reps, reps > 1)[0]
 }
 
 /// Timed passes per contender in `throughputs`.
@@ -73,19 +73,28 @@ pub const PASSES: usize = 5;
 /// read native ÷ Embree 0.63 in a full bench run and 1.01 / 0.99 in two
 /// runs of that scene alone, with the same binary.
 pub(super) fn throughputs(accels: &[&dyn Traversal], rays: &[Ray], kind: RayKind, threads: usize, passes: usize) -> Vec<f64> {
-    timed_passes(accels, rays, kind, threads, passes, true)
+    let each: Vec<(&dyn Traversal, RayKind)> = accels.iter().map(|&a| (a, kind)).collect();
+    timed_passes(&each, rays, threads, passes, true)
 }
 
-/// Mrays/s of each of `accels`: `passes` rounds of one timed pass each,
-/// after one untimed round when `warm_up`, the best pass of each kept.
-fn timed_passes(accels: &[&dyn Traversal], rays: &[Ray], kind: RayKind, threads: usize, passes: usize, warm_up: bool) -> Vec<f64> {
+/// `throughputs` with each structure's own call (`RayKind`) for the same
+/// rays: native's batch call against another backend's fastest.
+#[cfg(has_embree)]
+pub(super) fn throughputs_by_call(each: &[(&dyn Traversal, RayKind)], rays: &[Ray], threads: usize, passes: usize) -> Vec<f64> {
+    timed_passes(each, rays, threads, passes, true)
+}
+
+/// Mrays/s of each of `accels` through its call: `passes` rounds of one
+/// timed pass each, after one untimed round when `warm_up`, the best pass
+/// of each kept.
+fn timed_passes(accels: &[(&dyn Traversal, RayKind)], rays: &[Ray], threads: usize, passes: usize, warm_up: bool) -> Vec<f64> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
     let mut best = vec![f64::INFINITY; accels.len()];
     let skip = warm_up as usize;
     for pass in 0..passes + skip {
-        for (a, b) in accels.iter().zip(best.iter_mut()) {
+        for (&(a, kind), b) in accels.iter().zip(best.iter_mut()) {
             let start = Instant::now();
-            pool.install(|| trace_pass(*a, rays, kind));
+            pool.install(|| trace_pass(a, rays, kind));
             if pass >= skip {
                 *b = b.min(start.elapsed().as_secs_f64());
             }
