@@ -63,6 +63,17 @@ impl BatchMode {
             Major::V4 => &[BatchMode::Loop, BatchMode::Packet4, BatchMode::Packet8, BatchMode::Packet16],
         }
     }
+
+    /// The mode's name in the bench's tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            BatchMode::Loop => "loop",
+            BatchMode::Stream => "stream",
+            BatchMode::Packet4 => "packet4",
+            BatchMode::Packet8 => "packet8",
+            BatchMode::Packet16 => "packet16",
+        }
+    }
 }
 
 impl Major {

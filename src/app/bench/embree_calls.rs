@@ -16,37 +16,29 @@
 //! with every other contender, and on arch:2M's diffuse rays that alone
 //! read Embree 4's packets about 20 % faster than the same calls alternating.
 
+use super::run::RaySets;
 use super::tables::BestCall;
 use super::timing::{throughput, throughputs_by_call, RayKind};
 use super::Contender;
 use crate::accel::embree::{BatchMode, EmbreeBackend, Major, Quality};
 use crate::accel::{BackendKind, Traversal};
 use crate::error::Result;
-use crate::ray::Ray;
 use crate::scene::Scene;
 use std::fmt::Write as _;
-
-/// The scene's ray sets a batch call is timed on, by label.
-pub(super) struct CallRays<'a> {
-    pub camera: &'a [Ray],
-    pub shadow: &'a [Ray],
-    pub random: &'a [Ray],
-    pub diffuse: &'a [Ray],
-}
 
 /// `major`'s batch calls on `scene`'s rays, as rows of the batch-call table
 /// (`rows`), and per ray kind its fastest call timed against `native`'s
 /// batch call, `passes` rounds alternating (`best`).
-pub(super) fn embree_calls(major: Major, scene: &Scene, native: Option<&dyn Traversal>, rays: &CallRays, passes: usize, rows: &mut String, best: &mut Vec<BestCall>) -> Result<()> {
+pub(super) fn embree_calls(major: Major, scene: &Scene, native: Option<&dyn Traversal>, rays: &RaySets, passes: usize, rows: &mut String, best: &mut Vec<BestCall>) -> Result<()> {
     let mut e = EmbreeBackend::build(major, &scene.shapes, 1, Quality::Medium)?;
     let embree = Contender::Backend(if major == Major::V3 { BackendKind::Embree3 } else { BackendKind::Embree4 });
     // (label, rays, coherent call, incoherent call); native's call is the
     // main table's: the coherent one where there is one.
     for (label, rays, coherent, incoherent) in [
-        ("camera", rays.camera, Some(RayKind::Camera), RayKind::Random),
-        ("shadow", rays.shadow, Some(RayKind::Shadow), RayKind::ShadowIncoherent),
-        ("random", rays.random, None, RayKind::Random),
-        ("diffuse", rays.diffuse, None, RayKind::Random),
+        ("camera", &rays.camera[..], Some(RayKind::Camera), RayKind::Random),
+        ("shadow", &rays.shadow[..], Some(RayKind::Shadow), RayKind::ShadowIncoherent),
+        ("random", &rays.random[..], None, RayKind::Random),
+        ("diffuse", &rays.diffuse[..], None, RayKind::Random),
     ] {
         let mut cells = Vec::new();
         let mut top: Option<(f64, BatchMode, RayKind, &str)> = None;
@@ -71,18 +63,8 @@ pub(super) fn embree_calls(major: Major, scene: &Scene, native: Option<&dyn Trav
             let m = throughputs_by_call(&[(n, coherent.unwrap_or(incoherent)), (&e, kind)], rays, 1, passes);
             (m[0], m[1])
         });
-        best.push(BestCall { scene: scene.name.clone(), rays: label, embree, call: format!("{} {flag}", call_name(mode)), paired });
+        best.push(BestCall { scene: scene.name.clone(), rays: label, embree, call: format!("{} {flag}", mode.name()), paired });
     }
     Ok(())
 }
 
-/// A batch call's name in the batch-call table's columns.
-fn call_name(mode: BatchMode) -> &'static str {
-    match mode {
-        BatchMode::Loop => "loop",
-        BatchMode::Stream => "stream",
-        BatchMode::Packet4 => "packet4",
-        BatchMode::Packet8 => "packet8",
-        BatchMode::Packet16 => "packet16",
-    }
-}

@@ -179,11 +179,11 @@ fn part(store: Option<&Checkpoints>, plan: &Plan, name: &str, scene: &str, measu
 }
 
 /// One scene's ray sets, each repeated up to `--rays`.
-struct RaySets {
-    camera: Vec<Ray>,
-    shadow: Vec<Ray>,
-    random: Vec<Ray>,
-    diffuse: Vec<Ray>,
+pub(super) struct RaySets {
+    pub(super) camera: Vec<Ray>,
+    pub(super) shadow: Vec<Ray>,
+    pub(super) random: Vec<Ray>,
+    pub(super) diffuse: Vec<Ray>,
 }
 
 impl RaySets {
@@ -287,9 +287,8 @@ fn bench_scene(args: &BenchArgs, plan: &Plan, name: &str, t: &mut Tables) -> Res
     let native = built.into_iter().find(|(k, _)| *k == Contender::Backend(BackendKind::Native)).map(|(_, b)| b);
     #[cfg(has_embree)]
     if !args.throughput_only {
-        let call_rays = super::embree_calls::CallRays { camera: &rays.camera, shadow: &rays.shadow, random: &rays.random, diffuse: &rays.diffuse };
         for &major in &plan.majors {
-            super::embree_calls::embree_calls(major, &scene, native.as_ref().map(|b| b.accel.as_ref()), &call_rays, args.passes, &mut t.modes, &mut t.embree_best)?;
+            super::embree_calls::embree_calls(major, &scene, native.as_ref().map(|b| b.accel.as_ref()), &rays, args.passes, &mut t.modes, &mut t.embree_best)?;
         }
     }
     drop(native);
@@ -466,7 +465,9 @@ fn modes_table(t: &Tables) -> String {
         "\nEmbree batch calls, 1 thread, Mrays/s: each call with the coherent flag (camera and shadow rays) and with the incoherent \
          flag (c / i); the loop of rtcIntersect1, Embree 3's rtcIntersect1M stream (Embree 4 has none: –), rtcIntersect4/8/16 packets:\n"
     );
-    let _ = writeln!(md, "| scene | embree | rays | loop c | loop i | stream c | stream i | packet4 c | packet4 i | packet8 c | packet8 i | packet16 c | packet16 i |");
+    // Embree 3 has every call.
+    let calls: String = accel::embree::BatchMode::all(accel::embree::Major::V3).iter().map(|m| format!(" {0} c | {0} i |", m.name())).collect();
+    let _ = writeln!(md, "| scene | embree | rays |{calls}");
     let _ = writeln!(md, "|---|---|---|{}", "---:|".repeat(10));
     // Embree 4's rows have no stream columns: put dashes in their place.
     for line in t.modes.lines() {
