@@ -16,9 +16,9 @@
 //! with every other contender, and on arch:2M's diffuse rays that alone
 //! read Embree 4's packets about 20 % faster than the same calls alternating.
 
-use super::run::RaySets;
+use super::ray_sets::RaySets;
 use super::tables::BestCall;
-use super::timing::{throughput, throughputs_by_call, RayKind};
+use super::timing::{throughput, throughputs_by_call, RayKind, RaySet};
 use super::Contender;
 use crate::accel::embree::{BatchMode, EmbreeBackend, Major, Quality};
 use crate::accel::{BackendKind, Traversal};
@@ -35,10 +35,10 @@ pub(super) fn embree_calls(major: Major, scene: &Scene, native: Option<&dyn Trav
     // (label, rays, coherent call, incoherent call); native's call is the
     // main table's: the coherent one where there is one.
     for (label, rays, coherent, incoherent) in [
-        ("camera", &rays.camera[..], Some(RayKind::Camera), RayKind::Random),
-        ("shadow", &rays.shadow[..], Some(RayKind::Shadow), RayKind::ShadowIncoherent),
-        ("random", &rays.random[..], None, RayKind::Random),
-        ("diffuse", &rays.diffuse[..], None, RayKind::Random),
+        ("camera", rays.get(RaySet::Camera), Some(RayKind::Camera), RayKind::Random),
+        ("shadow", rays.get(RaySet::Shadow), Some(RayKind::Shadow), RayKind::ShadowIncoherent),
+        ("random", rays.get(RaySet::Random), None, RayKind::Random),
+        ("diffuse", rays.get(RaySet::Diffuse), None, RayKind::Random),
     ] {
         let mut cells = Vec::new();
         let mut top: Option<(f64, BatchMode, RayKind, &str)> = None;

@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 #[cfg(has_embree)]
 mod embree_calls;
 mod resume;
+mod ray_sets;
 mod run;
 mod tables;
 mod timing;

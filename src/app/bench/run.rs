@@ -2,15 +2,15 @@
 //! scene timed in turn into the run's tables, then the report.
 
 use super::tables::{best_call_table, ratio_table, scaling_table, BestCall, Sample};
-use super::timing::{labels, throughput, throughputs, RaySet, TIMED};
+use super::timing::{labels, throughput, throughputs, TIMED};
+use super::ray_sets::RaySets;
 use super::resume::{exact, parse_exact, Checkpoints};
 use super::{cpu_model, embree_sah, load_bench_scene, path_render_rows, peers, seed_timing, thread_counts, BenchArgs, Contender};
 use super::{BRUTE_LIMIT, BUILD_REPS, DEFAULT_SCENES, RENDER_SCENES};
-use crate::accel::workloads::{camera_rays, diffuse_rays, random_rays, shadow_rays, tile_order};
+use crate::accel::workloads::camera_rays;
 use crate::accel::{self, BackendKind, Traversal};
 use crate::camera::Camera;
 use crate::error::Result;
-use crate::ray::Ray;
 use crate::render::{self, normals::NormalShading, RenderSettings};
 use crate::scene::Scene;
 use serde_json::{json, Value};
@@ -176,40 +176,6 @@ fn part(store: Option<&Checkpoints>, plan: &Plan, name: &str, scene: &str, measu
     let t = measure()?;
     store.save(name, &key, t.to_json())?;
     Ok(t)
-}
-
-/// One scene's ray sets, each repeated up to `--rays`.
-pub(super) struct RaySets {
-    pub(super) camera: Vec<Ray>,
-    pub(super) shadow: Vec<Ray>,
-    pub(super) random: Vec<Ray>,
-    pub(super) diffuse: Vec<Ray>,
-}
-
-impl RaySets {
-    /// Camera rays in scanlines of a `w x h` frame; shadow rays from their
-    /// hits (`first` finds them); random rays; diffuse rays from the hits
-    /// taken in the renderer's tiles. Repeated up to `n`: only the camera
-    /// rays that hit make shadow rays (7 % of them on arch), and a pass of
-    /// 60k rays (under a millisecond) timed mostly the thread pool's start
-    /// at 2 threads (arch:500k shadow rays 91 Mrays/s at 1 and 2 threads
-    /// alike, Embree 70 and 69).
-    fn new(scene: &Scene, first: &dyn Traversal, camera_all: &[Ray], w: u32, h: u32, n: usize) -> RaySets {
-        let repeat = |v: Vec<Ray>| if v.is_empty() { v } else { v.iter().cycle().take(n).copied().collect() };
-        let camera: Vec<Ray> = repeat(camera_all.to_vec());
-        let shadow = repeat(shadow_rays(scene, first, &camera));
-        let diffuse = repeat(diffuse_rays(scene, first, &tile_order(camera_all, w, h, render::TILE), 7));
-        RaySets { camera, shadow, random: random_rays(scene, n, 1), diffuse }
-    }
-
-    fn get(&self, set: RaySet) -> &[Ray] {
-        match set {
-            RaySet::Camera => &self.camera,
-            RaySet::Shadow => &self.shadow,
-            RaySet::Random => &self.random,
-            RaySet::Diffuse => &self.diffuse,
-        }
-    }
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
@@ -466,9 +432,10 @@ fn modes_table(t: &Tables) -> String {
          flag (c / i); the loop of rtcIntersect1, Embree 3's rtcIntersect1M stream (Embree 4 has none: –), rtcIntersect4/8/16 packets:\n"
     );
     // Embree 3 has every call.
-    let calls: String = accel::embree::BatchMode::all(accel::embree::Major::V3).iter().map(|m| format!(" {0} c | {0} i |", m.name())).collect();
+    let modes = accel::embree::BatchMode::all(accel::embree::Major::V3);
+    let calls: String = modes.iter().map(|m| format!(" {0} c | {0} i |", m.name())).collect();
     let _ = writeln!(md, "| scene | embree | rays |{calls}");
-    let _ = writeln!(md, "|---|---|---|{}", "---:|".repeat(10));
+    let _ = writeln!(md, "|---|---|---|{}", "---:|".repeat(2 * modes.len()));
     // Embree 4's rows have no stream columns: put dashes in their place.
     for line in t.modes.lines() {
         if line.contains("| embree4 |") {
