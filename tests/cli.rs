@@ -357,8 +357,18 @@ fn bench_writes_csv_and_markdown_tables() {
         }
         // Each Embree's batch calls were timed, and native against the
         // fastest per ray kind, each cell naming the call.
+        let header = md.lines().find(|l| l.starts_with("| scene | embree | rays |")).unwrap_or_else(|| panic!("no batch-call table: {md}"));
+        let columns: Vec<&str> = header.split(" | ").collect();
         for e in &embrees {
             assert!(md.contains(&format!("| cow | {e} | camera |")), "no batch-call row for {e}: {md}");
+            // Every row has the header's cells; Embree 4 has no streams.
+            for row in md.lines().filter(|l| l.starts_with(&format!("| cow | {e} | ")) && !l.contains(" i) |")) {
+                let cells: Vec<&str> = row.split(" | ").collect();
+                assert_eq!(cells.len(), columns.len(), "{header}\n{row}");
+                for (name, cell) in columns.iter().zip(&cells).skip(3) {
+                    assert_eq!(*cell == "–", name.starts_with("stream") && e == "embree4" || name.ends_with(" c") && [" random", " diffuse"].iter().any(|k| row.contains(&format!("|{k} |"))), "{name}: {row}");
+                }
+            }
             let row = md.lines().find(|l| l.starts_with(&format!("| cow | {e} | ")) && l.contains(" i) |")).unwrap_or_else(|| panic!("no native ÷ fastest call row for {e}: {md}"));
             let cells: Vec<&str> = row.split(" | ").skip(2).collect();
             assert_eq!(cells.len(), 4, "{row}");

@@ -431,24 +431,12 @@ fn modes_table(t: &Tables) -> String {
         "\nEmbree batch calls, 1 thread, Mrays/s: each call with the coherent flag (camera and shadow rays) and with the incoherent \
          flag (c / i); the loop of rtcIntersect1, Embree 3's rtcIntersect1M stream (Embree 4 has none: –), rtcIntersect4/8/16 packets:\n"
     );
-    // Embree 3 has every call.
+    // Embree 3 has every call; each row has a cell pair for each (`embree_calls`).
     let modes = accel::embree::BatchMode::all(accel::embree::Major::V3);
     let calls: String = modes.iter().map(|m| format!(" {0} c | {0} i |", m.name())).collect();
     let _ = writeln!(md, "| scene | embree | rays |{calls}");
     let _ = writeln!(md, "|---|---|---|{}", "---:|".repeat(2 * modes.len()));
-    // Embree 4's rows have no stream columns: put dashes in their place.
-    for line in t.modes.lines() {
-        if line.contains("| embree4 |") {
-            let cells: Vec<&str> = line.split(" | ").collect();
-            // scene, embree4, rays, loop c, loop i, then packets.
-            let mut fixed = cells[..5].to_vec();
-            fixed.extend(["–", "–"]);
-            fixed.extend(&cells[5..]);
-            let _ = writeln!(md, "{}", fixed.join(" | "));
-        } else {
-            let _ = writeln!(md, "{line}");
-        }
-    }
+    md.push_str(&t.modes);
     let _ = writeln!(
         md,
         "\nnative's batch call ÷ each Embree's fastest batch call above (the best of its columns, named in each cell), 1 thread: \
