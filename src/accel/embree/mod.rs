@@ -84,24 +84,48 @@ impl Major {
     }
 
     /// The batch calls the backend uses for coherent (camera, shadow) and
-    /// incoherent batches, by measurement (`pathtracer bench`'s table of
-    /// Embree's batch calls, 1 thread):
+    /// incoherent batches on this CPU, by measurement (`pathtracer bench`'s
+    /// table of Embree's batch calls, 1 thread, Mrays/s):
     /// * Embree 3.13.5: streams beat 8-ray packets for camera and shadow rays
     ///   (cow camera 46.9 against 27.2 Mrays/s) and matched them for random
     ///   rays, so streams for both.
-    /// * Embree 4.4.0 (no streams), on the 2-vCPU Intel Xeon (2^18 rays, best
-    ///   of 3): 16-ray packets with the coherent flag are its fastest camera
-    ///   call (cow 32.5, CBbunny 34.9, arch:500k 37.2 against a loop's 14.0,
-    ///   14.2, 19.3) and fastest or level for shadow rays; for random rays
-    ///   8-ray packets with the incoherent flag beat the loop of single rays
-    ///   (cow 8.61 / 7.78, CBbunny 9.56 / 7.93, arch:500k 15.99 / 12.22,
-    ///   grass:300k 1.45 / 1.38). The bench times every call each run
-    ///   (`docs/benchmarks/bench.md`, "Embree batch calls").
+    /// * Embree 4.4.0 (no streams) on a CPU with AVX-512 (a 2-vCPU Intel
+    ///   Xeon, 2^18 rays, best of 3): 16-ray packets with the coherent flag
+    ///   are its fastest camera call (cow 32.5, CBbunny 34.9, arch:500k 37.2
+    ///   against a loop's 14.0, 14.2, 19.3) and fastest or level for shadow
+    ///   rays; for random rays 8-ray packets with the incoherent flag beat
+    ///   the loop of single rays (cow 8.61 / 7.78, CBbunny 9.56 / 7.93,
+    ///   arch:500k 15.99 / 12.22, grass:300k 1.45 / 1.38).
+    /// * Embree 4.4.0 without AVX-512 (a 2-vCPU AMD EPYC, Zen 3, AVX2; 2^18
+    ///   rays, best of 3): Embree runs 16-ray packets as two 8-wide halves,
+    ///   and they are its slowest coherent call; 8-ray packets with the
+    ///   coherent flag are its fastest on every scene, camera / shadow rays,
+    ///   packets of 8 against 16: cow 29.95 / 11.31 against 13.45 / 5.58,
+    ///   CBbunny 30.94 / 20.09 against 14.07 / 11.20, maxplanck 15.46 / 4.91
+    ///   against 9.27 / 3.88, beetle 32.71 / 8.22 against 15.59 / 4.79,
+    ///   arch:2M 41.25 / 28.24 against 15.62 / 7.87.
+    ///
+    /// The bench times every call each run (`docs/benchmarks/bench.md`,
+    /// "Embree batch calls").
     pub fn default_batch_modes(self) -> (BatchMode, BatchMode) {
         match self {
             Major::V3 => (BatchMode::Stream, BatchMode::Stream),
-            Major::V4 => (BatchMode::Packet16, BatchMode::Packet8),
+            Major::V4 if sixteen_lanes() => (BatchMode::Packet16, BatchMode::Packet8),
+            Major::V4 => (BatchMode::Packet8, BatchMode::Packet8),
         }
+    }
+}
+
+/// Whether this CPU has 16-lane float vectors (AVX-512), where Embree's
+/// 16-ray packets run one lane a ray.
+fn sixteen_lanes() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
 
