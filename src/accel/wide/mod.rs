@@ -443,6 +443,14 @@ impl<const W: usize> Traversal for WideBvh<W> {
 
     fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len());
+        // Where the tree streams its shadow rays (large trees whose rays miss
+        // the caches), scattered ones stream too: one ray at a time, the
+        // subdivided CBbunny's later-bounce shadow rays rendered 3 % slower.
+        #[cfg(target_arch = "x86_64")]
+        if self.policy.avx() && W == 8 && self.policy.shadows == policy::ShadowBatches::Streams {
+            // SAFETY: the policy has AVX2 box tests only where the CPU has AVX2.
+            return unsafe { self.any_streams(rays, out, self.policy.any_order) };
+        }
         self.any_all_simd(rays, out)
     }
 

@@ -80,11 +80,18 @@ fn every_width_and_instruction_set_matches_brute_force() {
     if interleaved.policy.avx() {
         interleaved.policy.closest = ClosestBatches::Interleaved;
     }
+    // Shadow streams too (coherent and incoherent occlusion batches) are
+    // for large trees only.
+    let mut shadow_streams = WideBvh::<8>::build(&shapes);
+    if shadow_streams.policy.avx() {
+        shadow_streams.policy.shadows = policy::ShadowBatches::Streams;
+    }
     let mut candidates: Vec<(&str, Box<dyn Traversal>)> = vec![
         ("4-wide", Box::new(WideBvh::<4>::build(&shapes))),
         ("8-wide SSE2", Box::new(sse8)),
         ("8-wide default", Box::new(WideBvh::<8>::build(&shapes))),
         ("8-wide interleaved", Box::new(interleaved)),
+        ("8-wide shadow streams", Box::new(shadow_streams)),
     ];
     if avx512_on() {
         let mut wide = WideBvh::<8>::build(&shapes);

@@ -414,7 +414,7 @@ fn report(args: &BenchArgs, plan: &Plan, t: &Tables) -> String {
             md,
             "\nPath-traced render, 480x360 (CS184 crop), 64 spp, -m 5, seed 1, {all} threads: rays traced in batches (the renderer's \
              default: each sample round of a tile traces its camera rays as one coherent batch, then bounce by bounce its shadow rays \
-             as one batch and its other rays as another) or one at a time. Image: compared with the scene's first row, pixel by pixel:\n"
+             as one batch (coherent from the camera rays' hits, incoherent after) and its other rays as another) or one at a time. Image: compared with the scene's first row, pixel by pixel:\n"
         );
         let _ = writeln!(md, "| scene | backend | rays traced | render s | rays | Mrays/s | image |");
         let _ = writeln!(md, "|---|---|---|---:|---:|---:|---|");

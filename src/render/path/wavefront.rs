@@ -24,22 +24,33 @@ use glam::Vec3;
 /// How a bounce's rays are traced.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Tracing {
-    /// Shadow rays as one coherent batch, the other rays as one batch.
+    /// Shadow rays as one batch, the other rays as another. The first
+    /// bounce's shadow rays leave the tile's camera hits, close together,
+    /// and go as a coherent batch. Later bounces' shadow rays leave points
+    /// scattered over the scene and go as an incoherent one. Called coherent,
+    /// Embree 4 traced them in packets meant for rays that travel together,
+    /// and its 5-bounce renders of CBbunny and the subdivided CBbunny took
+    /// 3–12 % longer (docs/notes/2026-12-03-embree-coherent-packets.md).
     Batched,
     /// Each ray on its own.
     OneByOne,
 }
 
 impl Tracing {
-    /// `occluded[i]` for `shadow[i]`, `found[i]` for `closest[i]`.
-    fn trace(self, accel: &dyn Traversal, shadow: &[Ray], closest: &[Ray], occluded: &mut Vec<bool>, found: &mut Vec<Option<Hit>>) {
+    /// `occluded[i]` for `shadow[i]`, `found[i]` for `closest[i]`; the
+    /// shadow rays of the `first` bounce leave the camera rays' hits.
+    fn trace(self, accel: &dyn Traversal, shadow: &[Ray], closest: &[Ray], occluded: &mut Vec<bool>, found: &mut Vec<Option<Hit>>, first: bool) {
         occluded.clear();
         occluded.resize(shadow.len(), false);
         found.clear();
         found.resize(closest.len(), None);
         match self {
             Tracing::Batched => {
-                accel.occluded_coherent(shadow, occluded);
+                if first {
+                    accel.occluded_coherent(shadow, occluded);
+                } else {
+                    accel.occluded_batch(shadow, occluded);
+                }
                 accel.intersect_batch(closest, found);
             }
             Tracing::OneByOne => {
@@ -119,6 +130,8 @@ impl<'a> PathTracer<'a> {
         let mut terms: Vec<Term> = Vec::with_capacity(n * (per_light + self.lights.lights.len() + hemi + 1));
         let mut guide_slot = None;
         let fetch_hits = self.scene.hits_miss_caches();
+        // Every live path is at the same bounce in each round.
+        let mut first = true;
         loop {
             shadow.clear();
             closest.clear();
@@ -147,7 +160,8 @@ impl<'a> PathTracer<'a> {
             }
             // Trace: shadow rays as one batch, everything else as another.
             *ray_count += (shadow.len() + closest.len()) as u64;
-            tracing.trace(accel, &shadow, &closest, &mut occluded, &mut found);
+            tracing.trace(accel, &shadow, &closest, &mut occluded, &mut found, first);
+            first = false;
             // Add what the rays found, in the path-at-a-time order.
             for p in paths.iter_mut() {
                 // The vertex stays in place until its successor replaces it
