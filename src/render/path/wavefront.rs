@@ -37,16 +37,16 @@ pub(super) enum Tracing {
 }
 
 impl Tracing {
-    /// `occluded[i]` for `shadow[i]`, `found[i]` for `closest[i]`; the
-    /// shadow rays of the `first` bounce leave the camera rays' hits.
-    fn trace(self, accel: &dyn Traversal, shadow: &[Ray], closest: &[Ray], occluded: &mut Vec<bool>, found: &mut Vec<Option<Hit>>, first: bool) {
+    /// `occluded[i]` for `shadow[i]`, `found[i]` for `closest[i]`;
+    /// `coherent_shadows`: the shadow rays start close together.
+    fn trace(self, accel: &dyn Traversal, shadow: &[Ray], closest: &[Ray], occluded: &mut Vec<bool>, found: &mut Vec<Option<Hit>>, coherent_shadows: bool) {
         occluded.clear();
         occluded.resize(shadow.len(), false);
         found.clear();
         found.resize(closest.len(), None);
         match self {
             Tracing::Batched => {
-                if first {
+                if coherent_shadows {
                     accel.occluded_coherent(shadow, occluded);
                 } else {
                     accel.occluded_batch(shadow, occluded);
@@ -130,8 +130,9 @@ impl<'a> PathTracer<'a> {
         let mut terms: Vec<Term> = Vec::with_capacity(n * (per_light + self.lights.lights.len() + hemi + 1));
         let mut guide_slot = None;
         let fetch_hits = self.scene.hits_miss_caches();
-        // Every live path is at the same bounce in each round.
-        let mut first = true;
+        // Every live path is at the same bounce in each round: the first
+        // round's vertices are the tile's camera hits.
+        let mut first_bounce = true;
         loop {
             shadow.clear();
             closest.clear();
@@ -160,8 +161,8 @@ impl<'a> PathTracer<'a> {
             }
             // Trace: shadow rays as one batch, everything else as another.
             *ray_count += (shadow.len() + closest.len()) as u64;
-            tracing.trace(accel, &shadow, &closest, &mut occluded, &mut found, first);
-            first = false;
+            tracing.trace(accel, &shadow, &closest, &mut occluded, &mut found, first_bounce);
+            first_bounce = false;
             // Add what the rays found, in the path-at-a-time order.
             for p in paths.iter_mut() {
                 // The vertex stays in place until its successor replaces it
