@@ -56,10 +56,13 @@ pub enum BatchMode {
 }
 
 impl BatchMode {
+    /// Every mode of either major (Embree 3 has them all).
+    pub const EVERY: &'static [BatchMode] = &[BatchMode::Loop, BatchMode::Stream, BatchMode::Packet4, BatchMode::Packet8, BatchMode::Packet16];
+
     /// Every mode `major` has.
     pub fn all(major: Major) -> &'static [BatchMode] {
         match major {
-            Major::V3 => &[BatchMode::Loop, BatchMode::Stream, BatchMode::Packet4, BatchMode::Packet8, BatchMode::Packet16],
+            Major::V3 => BatchMode::EVERY,
             Major::V4 => &[BatchMode::Loop, BatchMode::Packet4, BatchMode::Packet8, BatchMode::Packet16],
         }
     }
@@ -538,7 +541,7 @@ mod present {
     fn cpu_isa() -> &'static str {
         #[cfg(target_arch = "x86_64")]
         {
-            if is_x86_feature_detected!("avx512f") {
+            if super::sixteen_lanes() {
                 return "AVX-512";
             }
             if is_x86_feature_detected!("avx2") {

@@ -42,9 +42,9 @@ pub(super) fn embree_calls(major: Major, scene: &Scene, native: Option<&dyn Trav
     ] {
         let mut cells = Vec::new();
         let mut top: Option<(f64, BatchMode, RayKind, &str)> = None;
-        // One column pair per call of the table's header (Embree 3's, every
-        // call); a call this major lacks reads as dashes.
-        for &mode in BatchMode::all(Major::V3) {
+        // A column pair for every call the table's header names; a call
+        // this major lacks reads as dashes.
+        for &mode in BatchMode::EVERY {
             if !BatchMode::all(major).contains(&mode) {
                 cells.extend(["–".to_string(), "–".to_string()]);
                 continue;
