@@ -111,6 +111,12 @@ pub struct RenderSettings {
     pub share: Share,
     /// Return every pixel's exact sums (`RenderOutput::sums`), for a partial.
     pub keep_sums: bool,
+    /// At one sample a pixel, trace it through the pixel's centre (CS184's
+    /// `-s 1`, the default) rather than through a random point of the pixel.
+    /// The centre is a point sample of the image, not an estimate of the
+    /// pixel's average, so a render that must agree in expectation with
+    /// another estimator (`pathtracer validate`) turns it off.
+    pub centre_single_sample: bool,
 }
 
 /// Which part of a render's work to do. Every pixel sample has its own
@@ -149,7 +155,7 @@ impl Share {
 
 impl RenderSettings {
     pub fn new(width: u32, height: u32, spp: u32, seed: u64) -> Self {
-        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_rays: true, sampler: SamplerKind::Sobol, share: Share::All, keep_sums: false }
+        RenderSettings { width, height, spp, seed, region: None, adaptive: None, progress: false, batch_rays: true, sampler: SamplerKind::Sobol, share: Share::All, keep_sums: false, centre_single_sample: true }
     }
 
     /// The region rendered: `region`, or the whole frame.
@@ -258,7 +264,7 @@ fn sample_tile(camera: &Camera, accel: &dyn Traversal, integ: &dyn Integrator, s
             p.start_sample();
             // Splats are box-filtered over their pixel: the camera samples
             // must be too, even at one sample per pixel.
-            let (jx, jy) = if s.spp == 1 && !splatting { (0.5, 0.5) } else { p.sampler.camera() };
+            let (jx, jy) = if s.spp == 1 && s.centre_single_sample && !splatting { (0.5, 0.5) } else { p.sampler.camera() };
             let (x, y) = ((p.x as f32 + jx) / w, (p.y as f32 + jy) / h);
             // A pinhole draws nothing more: `-b 0` images are those of a
             // camera without a lens, bit for bit.

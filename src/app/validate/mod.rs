@@ -161,10 +161,10 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
     let (passed, failed, skipped, unresolved) = (count(Status::Pass), count(Status::Fail), count(Status::Skipped), count(Status::Unresolved));
     let took = start.elapsed().as_secs_f64();
     println!(
-        "{} | {} checks: {passed} passed, {failed} failed, {unresolved} undecided, {skipped} skipped | {took:.1} s of a {:.0} s budget",
+        "{} | {} checks: {passed} passed, {failed} failed, {unresolved} undecided, {skipped} skipped | {took:.1} s of a {} budget",
         scene.name,
         checks.len(),
-        budget.as_secs_f64()
+        seconds(budget.as_secs_f64())
     );
     if let Some(dir) = &args.report {
         report::write(dir, &scene.name, &checks, took)?;
@@ -176,6 +176,16 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
         return Err(Error::usage(format!("validate: {unresolved} of {} checks could not be decided on {} (see their lines)", checks.len(), path.display())));
     }
     Ok(())
+}
+
+/// A time as the checks' lines write it: whole seconds, or tenths below 10 s
+/// (a 0.5 s budget is not "0 s").
+fn seconds(s: f64) -> String {
+    if s < 10.0 {
+        format!("{s:.1} s")
+    } else {
+        format!("{s:.0} s")
+    }
 }
 
 #[cfg(test)]

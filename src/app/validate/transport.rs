@@ -184,7 +184,7 @@ pub fn compare_estimators(name: &str, a: &Estimator, b: &Estimator, budget: Dura
     let cannot = |spp_needed: f64, per_spp: f64, seconds: f64| {
         let need = spp_needed * per_spp + seconds;
         let status = if optional { Status::Skipped } else { Status::Unresolved };
-        Check { seconds, ..Check::new(name, status, format!("the budget's share ({total:.1} s) cannot decide it: about {need:.0} s would (a --budget {:.0} times larger){}", (need / total).max(1.0).ceil(), if optional { format!("; {COVERED}") } else { String::new() })) }
+        Check { seconds, ..Check::new(name, status, format!("the budget's share ({total:.1} s) cannot decide it: about {} would (a --budget {:.0} times larger){}", super::seconds(need), (need / total).max(1.0).ceil(), if optional { format!("; {COVERED}") } else { String::new() })) }
     };
     let left = |start: Instant| total - start.elapsed().as_secs_f64();
     let spp = ((left(start) / (cost_a + cost_b)).floor() as u32).min(4096);
@@ -265,6 +265,8 @@ pub fn estimator<'a>(name: &str, job: Job, sampler: SamplerKind, adaptive: Optio
         name: name.into(),
         render: Box::new(move |seed, spp| {
             let mut s = RenderSettings::new(WIDTH, HEIGHT, spp, seed);
+            // Every estimator estimates the pixels' averages, at any count.
+            s.centre_single_sample = false;
             s.sampler = sampler;
             s.adaptive = adaptive;
             job.render(accel, &s).expect("a prepared job renders")
@@ -337,5 +339,37 @@ mod tests {
         assert!(t.differ.is_empty() && !t.undecided.is_empty(), "{:?}", t.details);
         let lone = t.lone.expect("the bright render is named");
         assert!(lone.contains("render 10 of 15 of BDPT") && lone.contains("region 4 of 4x3, channel R"), "{lone}");
+    }
+
+    /// A budget that affords one sample a pixel still compares like with
+    /// like: the estimators' one-sample renders estimate the pixels'
+    /// averages, as their many-sample renders do. CBempty's point light,
+    /// 1 cm under its ceiling, makes a bright spot that the pixels' centres
+    /// (the CLI's `-s 1`) sample far from its average: those renders read
+    /// the frame about 9 % brighter, which the checks took for a bug.
+    #[test]
+    fn one_sample_a_pixel_estimates_the_pixels_averages() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cs184/sky/CBempty.dae");
+        let scene = crate::scene::load_file(&path).expect("CBempty loads");
+        let mut camera = Camera::from_scene(&scene);
+        camera.resize_keep_fov(WIDTH, HEIGHT);
+        let accel = accel::build(BackendKind::Native, &scene.shapes, 0).unwrap();
+        let bounces = crate::render::integrator::Bounces { max_depth: 5, accumulate: true };
+        let spec = IntegratorSpec::Path(PathOptions { bounces, light_samples: 1, hemisphere: false, russian_roulette: true, specular_guide: 0.0 });
+        let job = || Job::new(scene.clone(), camera.clone(), None, Default::default(), spec).unwrap();
+        let native = accel.accel.as_ref();
+        let means = |e: &Estimator, base: u64, spp: u32| (0..REPLICATES as u64).map(|k| region_means(&(e.render)(base + k, spp).image)).collect::<Vec<_>>();
+        let estimator = estimator("path tracer", job(), SamplerKind::Sobol, None, native);
+        let many = means(&estimator, 101, 8);
+        let one = judge("one sample", "eight samples", &means(&estimator, 1, 1), &many);
+        assert!(one.differ.is_empty(), "{:?}", one.differ);
+        // The pixels' centres, as the CLI traces one sample: the test tells them apart.
+        let centre_job = job();
+        let centres = Estimator {
+            name: "pixel centres".into(),
+            render: Box::new(move |seed, spp| centre_job.render(native, &RenderSettings::new(WIDTH, HEIGHT, spp, seed)).unwrap()),
+        };
+        let centred = judge("pixel centres", "eight samples", &means(&centres, 1, 1), &many);
+        assert!(centred.differ.iter().any(|l| l.starts_with("whole frame")), "{:?}", centred.details);
     }
 }
