@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """The README's headline benchmark table, from the bench's own CSV (docs/benchmarks/bench.csv):
 per scene, native's throughput ÷ each other contender's at 1 thread and at the run's most
-threads, for camera, shadow and random rays, with the run's date, commit and CPU from the first
+threads, for camera, shadow, random and diffuse rays traced as batches (each other contender's
+column the worst of those cells), with the run's date, commit and CPU from the first
 line of docs/benchmarks/bench.md. Pasted between the README's bench markers by
 scripts/bench-readme.sh; prints the table without --paste.
 
@@ -42,7 +43,9 @@ def main():
         return f"{min(r):.2f}" if r else "–"
 
     out = [f"Native's ray throughput ÷ each contender's on the same rays (above 1: native is faster), at {lo} / {hi} "
-           f"threads, from one `pathtracer bench` run (`scripts/bench-readme.sh`). {run}", ""]
+           f"threads, from one `pathtracer bench` run (`scripts/bench-readme.sh`), rays traced as batches; a "
+           f"\"(worst)\" column is the lowest of that contender's {len(RAYS)} kinds at either thread count, and the "
+           f"one-ray-a-call cells are in bench.md. {run}", ""]
     head = "| scene | " + " | ".join(f"÷ {main_peer}: {k}" if i == 0 else k for i, k in enumerate(RAYS)) + "".join(f" | ÷ {o} (worst)" for o in others) + " |"
     out += [head, "|---|" + "---:|" * (len(RAYS) + len(others))]
     out += [f"| {s} | " + " | ".join(cell(s, k, main_peer) for k in RAYS) + "".join(f" | {worst(s, o)}" for o in others) + " |"
