@@ -12,10 +12,13 @@
 #   3. correctness: the harness's quick tier with every backend, its verdicts into the README and
 #      docs/validation/README.md (validation/verdict_summary.py).
 # Refuses a tree with uncommitted changes (the tables must name a commit that reproduces them)
-# and checks at the end that the commit did not change under it. On 2 cores: about 105-115 minutes
-# of bench, 65 of each full-tier run (with its BDPT axis) and 5 of quick tier once the references are cached (about
-# an hour more to render them after the exporters change: step 0, which may run earlier, on
-# its own). Run it on a quiet machine. Commit the changed files afterwards.
+# and checks at the end that the commit did not change under it. On 2 cores (a Zen 3 EPYC,
+# 2026-12-04): about 3 h of bench (grass 2M alone about an hour), about 110 minutes of each
+# full-tier run (half an hour of path-traced cases, the rest its BDPT axis) and 5 of quick tier
+# once the references are cached (40-60 minutes more to render them after the exporters change:
+# step 0, which may run earlier, on its own). The bench keeps its finished parts
+# (target/bench-readme), so a cut run continues on the same binary and CPU; the tiers start
+# over. Run it on a quiet machine. Commit the changed files afterwards.
 #
 #   scripts/refresh-headlines.sh [--skip-bench] [--skip-error] [--skip-verdicts] [--full-runs N]
 set -euo pipefail
