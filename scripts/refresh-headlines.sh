@@ -13,7 +13,7 @@
 #      docs/validation/README.md (validation/verdict_summary.py).
 # Refuses a tree with uncommitted changes (the tables must name a commit that reproduces them)
 # and checks at the end that the commit did not change under it. On 2 cores (a Zen 3 EPYC,
-# 2026-12-04): about 3 h of bench (grass 2M alone about an hour), about 110 minutes of each
+# 2026-12-04): 2.5-3 h of bench (grass 2M alone about an hour), about 110 minutes of each
 # full-tier run (half an hour of path-traced cases, the rest its BDPT axis) and 5 of quick tier
 # once the references are cached (40-60 minutes more to render them after the exporters change:
 # step 0, which may run earlier, on its own). The bench keeps its finished parts
