@@ -63,6 +63,39 @@ impl ObvhsPeer {
     fn oray(r: &Ray) -> ORay {
         ORay::new(v3(r.origin), v3(r.dir), r.tmin, r.tmax)
     }
+
+    /// The node tests and triangle tests of one closest-hit query, counted
+    /// on obvhs's own walk (its `traverse!`, run as `ray_traverse` runs
+    /// it): for profiles that set its work per ray beside native's
+    /// (`examples/trace_rays`).
+    pub fn closest_work(&self, ray: &Ray) -> (u32, u32) {
+        use obvhs_glam::UVec2;
+        if !ray.is_valid() {
+            return (0, 0);
+        }
+        let tmin = ray.tmin;
+        let mut r = Self::oray(ray);
+        let (mut nodes, mut tests) = (0u32, 0u32);
+        let mut state = self.bvh.new_traversal(r.direction);
+        let mut node;
+        obvhs::traverse!(
+            self.bvh,
+            node,
+            state,
+            {
+                nodes += 1;
+                node.intersect_ray(&r, state.oct_inv4)
+            },
+            {
+                tests += 1;
+                let t = self.tris[state.primitive_id as usize].intersect(&r);
+                if t > tmin && t < r.tmax {
+                    r.tmax = t;
+                }
+            }
+        );
+        (nodes, tests)
+    }
 }
 
 impl Traversal for ObvhsPeer {

@@ -149,8 +149,10 @@ impl<const W: usize> WideBvh<W> {
         })
     }
 
-    /// Mean work of closest-hit rays.
-    pub(super) fn closest_work(&self, rays: &[Ray]) -> f64 {
+    /// Mean work of closest-hit rays: the nodes and four-triangle leaf
+    /// groups one query visits (public for profiles that set it beside
+    /// another tree's, `examples/trace_rays`).
+    pub fn closest_work(&self, rays: &[Ray]) -> f64 {
         mean(rays, |r| {
             let mut work = 0;
             self.closest_counted::<false>(r, &mut work);
