@@ -58,3 +58,38 @@ fn finds_the_hits_native_finds(name: &str, build: impl Fn(&[pathtracer::scene::S
         assert!(differ * 1000 <= total, "{name} {spec}: {differ} of {total} answers differ from native");
     }
 }
+
+/// The work counts profiles set side by side (`examples/trace_rays`
+/// KIND `work`) follow each tree's walk: a ray that hits tested at least
+/// one node and one triangle (native: a node and a leaf group), a ray
+/// leaving the scene's box away from it tests no triangle (native: the
+/// root's children's boxes only), and the walks
+/// cull: far fewer tests per ray than triangles.
+#[test]
+fn work_counts_follow_the_walks() {
+    use pathtracer::accel::wide::{WideBvh, NATIVE_WIDTH};
+    use pathtracer::ray::Ray;
+    let scene = load_bench_scene("sphere:20k").unwrap();
+    let obvhs = ObvhsPeer::build(&scene.shapes).unwrap();
+    let native = WideBvh::<NATIVE_WIDTH>::build(&scene.shapes);
+    let rays = random_rays(&scene, 4000, 5);
+    let (mut nodes, mut tests, mut hits) = (0u64, 0u64, 0usize);
+    for r in &rays {
+        let (n, t) = obvhs.closest_work(r);
+        if obvhs.intersect(r).is_some() {
+            hits += 1;
+            assert!(n >= 1 && t >= 1, "a hit with {n} node tests and {t} triangle tests");
+            assert!(native.closest_work(std::slice::from_ref(r)) >= 2.0, "native: a hit without a node and a leaf group");
+        }
+        nodes += n as u64;
+        tests += t as u64;
+    }
+    assert!(hits > rays.len() / 10, "too few hits ({hits})");
+    let per_ray = tests as f64 / rays.len() as f64;
+    assert!(per_ray < 200.0, "obvhs tests {per_ray:.1} triangles a ray of 20k: its walk does not cull");
+    assert!(nodes >= rays.len() as u64 / 2, "obvhs: {nodes} node tests for {} rays", rays.len());
+    let b = scene.bounds();
+    let away = Ray::new(b.max + b.extent(), b.extent().normalize());
+    assert_eq!(obvhs.closest_work(&away).1, 0, "a ray leaving the box tested a triangle");
+    assert!(native.closest_work(&[away]) <= 1.0, "native: a ray missing the scene went past the root");
+}
