@@ -108,20 +108,19 @@ fn obvhs(_: &Scene) -> Result<Box<dyn Traversal>, String> {
 /// KIND `work`: the mean nodes and leaf tests per random ray.
 fn count_work(scene: &Scene, backend: &str, options: &accel::BuildOptions, n: usize) -> Result<(), String> {
     let rays = random_rays(scene, n, 1);
-    let per_ray = |sum: u64| sum as f64 / rays.len() as f64;
     match backend {
         "native" => {
             let bvh = WideBvh::<NATIVE_WIDTH>::build_with(&scene.shapes, &options.native);
             println!("{} native work: {:.2} nodes + four-triangle groups per random ray", scene.name, bvh.closest_work(&rays));
         }
-        "obvhs" => count_obvhs(scene, &rays, per_ray)?,
+        "obvhs" => count_obvhs(scene, &rays)?,
         _ => return Err(format!("KIND work: BACKEND native or obvhs, not {backend}")),
     }
     Ok(())
 }
 
 #[cfg(feature = "peers")]
-fn count_obvhs(scene: &Scene, rays: &[pathtracer::ray::Ray], per_ray: impl Fn(u64) -> f64) -> Result<(), String> {
+fn count_obvhs(scene: &Scene, rays: &[pathtracer::ray::Ray]) -> Result<(), String> {
     let peer = accel::obvhs_peer::ObvhsPeer::build(&scene.shapes).map_err(|e| e.to_string())?;
     let (mut nodes, mut tests) = (0u64, 0u64);
     for r in rays {
@@ -129,11 +128,12 @@ fn count_obvhs(scene: &Scene, rays: &[pathtracer::ray::Ray], per_ray: impl Fn(u6
         nodes += a as u64;
         tests += b as u64;
     }
+    let per_ray = |sum: u64| sum as f64 / rays.len() as f64;
     println!("{} obvhs work: {:.2} node tests, {:.2} triangle tests per random ray", scene.name, per_ray(nodes), per_ray(tests));
     Ok(())
 }
 
 #[cfg(not(feature = "peers"))]
-fn count_obvhs(_: &Scene, _: &[pathtracer::ray::Ray], _: impl Fn(u64) -> f64) -> Result<(), String> {
+fn count_obvhs(_: &Scene, _: &[pathtracer::ray::Ray]) -> Result<(), String> {
     Err("obvhs: build the example with --features peers".into())
 }

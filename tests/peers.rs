@@ -63,8 +63,8 @@ fn finds_the_hits_native_finds(name: &str, build: impl Fn(&[pathtracer::scene::S
 /// KIND `work`) follow each tree's walk: a ray that hits tested at least
 /// one node and one triangle (native: a node and a leaf group), a ray
 /// leaving the scene's box away from it tests no triangle (native: the
-/// root's children's boxes only), and the walks
-/// cull: far fewer tests per ray than triangles.
+/// root's children's boxes only), and the walks cull: far fewer tests
+/// per ray than triangles.
 #[test]
 fn work_counts_follow_the_walks() {
     use pathtracer::accel::wide::{WideBvh, NATIVE_WIDTH};

@@ -64,6 +64,15 @@ impl ObvhsPeer {
         ORay::new(v3(r.origin), v3(r.dir), r.tmin, r.tmax)
     }
 
+    /// Triangle `id`'s hit distance along `r` within our `(tmin, ...)`
+    /// range (obvhs's own range is closed, so it keeps a hit at `tmin`),
+    /// infinity for none.
+    #[inline(always)]
+    fn hit_t(&self, r: &ORay, id: usize, tmin: f32) -> f32 {
+        let t = self.tris[id].intersect(r);
+        if t > tmin { t } else { f32::INFINITY }
+    }
+
     /// The node tests and triangle tests of one closest-hit query, counted
     /// on obvhs's own walk (its `traverse!`, run as `ray_traverse` runs
     /// it): for profiles that set its work per ray beside native's
@@ -73,7 +82,6 @@ impl ObvhsPeer {
         if !ray.is_valid() {
             return (0, 0);
         }
-        let tmin = ray.tmin;
         let mut r = Self::oray(ray);
         let (mut nodes, mut tests) = (0u32, 0u32);
         let mut state = self.bvh.new_traversal(r.direction);
@@ -88,8 +96,8 @@ impl ObvhsPeer {
             },
             {
                 tests += 1;
-                let t = self.tris[state.primitive_id as usize].intersect(&r);
-                if t > tmin && t < r.tmax {
+                let t = self.hit_t(&r, state.primitive_id as usize, ray.tmin);
+                if t < r.tmax {
                     r.tmax = t;
                 }
             }
@@ -118,12 +126,8 @@ impl Traversal for ObvhsPeer {
         if !ray.is_valid() {
             return None;
         }
-        let tmin = ray.tmin;
         let mut hit = RayHit::none();
-        let found = self.bvh.ray_traverse(Self::oray(ray), &mut hit, |r, id| {
-            let t = self.tris[id].intersect(r);
-            if t > tmin { t } else { f32::INFINITY }
-        });
+        let found = self.bvh.ray_traverse(Self::oray(ray), &mut hit, |r, id| self.hit_t(r, id, ray.tmin));
         found.then(|| {
             let (geom_id, prim_id) = self.ids[hit.primitive_id as usize];
             Hit { t: hit.t, u: 0.0, v: 0.0, geom_id, prim_id }
@@ -134,10 +138,6 @@ impl Traversal for ObvhsPeer {
         if !ray.is_valid() {
             return false;
         }
-        let tmin = ray.tmin;
-        !self.bvh.ray_traverse_miss(Self::oray(ray), |r, id| {
-            let t = self.tris[id].intersect(r);
-            if t > tmin { t } else { f32::INFINITY }
-        })
+        !self.bvh.ray_traverse_miss(Self::oray(ray), |r, id| self.hit_t(r, id, ray.tmin))
     }
 }
